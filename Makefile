@@ -1,0 +1,41 @@
+# demcli: `make run` and `make test` set up everything on a fresh machine (Python 3.11 + pip).
+PYTHON ?= python3
+VENV   ?= .venv
+BIN    := $(VENV)/bin
+STAMP  := $(VENV)/.installed
+
+.PHONY: run test test-nojit stress bench smoke clean-jit clean
+
+$(STAMP): pyproject.toml
+	$(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet --upgrade pip
+	$(BIN)/python -m pip install --quiet -e '.[dev]'
+	touch $(STAMP)
+
+## run: set up, then run the quickstart case end to end
+run: $(STAMP)
+	$(BIN)/demcli run cases/quickstart.yaml
+
+## test: set up, then run the test suite
+test: $(STAMP)
+	$(BIN)/python -m pytest -q
+
+## stress: the long stability variants
+stress: $(STAMP)
+	DEMCLI_STRESS=1 $(BIN)/python -m pytest -q tests/stability
+
+## bench: throughput against the peer codes (see bench/README.md)
+bench: $(STAMP)
+	$(BIN)/python bench/run_bench.py
+
+## smoke: every case file for a few steps
+smoke: $(STAMP)
+	$(BIN)/python -m pytest -q tests/test_cases.py
+
+## clean-jit: drop numba's compiled-kernel cache (after pulling changes to kernels)
+clean-jit:
+	find . -name '__pycache__' -type d -path '*demcli*' -exec sh -c 'rm -f "$$1"/*.nbi "$$1"/*.nbc' _ {} \;
+	rm -rf .numba_cache
+
+clean: clean-jit
+	rm -rf runs $(VENV)

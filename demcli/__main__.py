@@ -1,0 +1,3 @@
+from demcli.cli import main
+
+main()

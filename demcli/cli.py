@@ -1,0 +1,71 @@
+"""Command line: a thin click layer over :mod:`demcli.pipeline` and :mod:`demcli.state`."""
+
+import sys
+
+import click
+
+from demcli import __version__
+
+
+@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(__version__, prog_name="demcli")
+def cli():
+    """DEM batch simulator for asphalt mixtures and railway ballast."""
+
+
+@cli.command()
+@click.argument("case", type=click.Path(dir_okay=False))
+@click.option("--from", "from_stage", metavar="STAGE", help="Re-run from this stage on.")
+@click.option("--only", metavar="STAGE", help="Run only this stage (its input must exist).")
+@click.option("--force", is_flag=True, help="Re-run stages even when up to date.")
+@click.option("--set", "overrides", multiple=True, metavar="PATH=VALUE",
+              help="Override a case value, e.g. --set stages.settle.time.duration=0.1s")
+@click.option("--out", type=click.Path(file_okay=False), help="Run folder (default runs/<case name>).")
+@click.option("--threads", type=click.IntRange(min=1), help="Threads for the kernels (default: all cores).")
+@click.option("--quiet", is_flag=True, help="No progress or log lines.")
+@click.option("--resume", is_flag=True, help="Continue interrupted stages from their checkpoints.")
+def run(case, from_stage, only, force, overrides, out, threads, quiet, resume):
+    """Run the stages of CASE (a YAML file)."""
+    from demcli.pipeline import run_case
+
+    results = run_case(case, out=out, from_stage=from_stage, only=only, force=force, overrides=overrides,
+                       threads=threads, quiet=quiet, resume=resume)
+    if not quiet:
+        for r in results:
+            click.echo(f"{r.name:>16}  {'skipped' if r.skipped else f'{r.wall_time:8.2f} s'}  {r.path}")
+
+
+@cli.command()
+@click.argument("case", type=click.Path(dir_okay=False))
+@click.option("--set", "overrides", multiple=True, metavar="PATH=VALUE", help="Override a case value.")
+def check(case, overrides):
+    """Validate CASE and print its plan (compiles nothing)."""
+    from demcli.check import describe_case
+
+    click.echo(describe_case(case, overrides))
+
+
+@cli.command()
+@click.argument("state", type=click.Path(dir_okay=False))
+def info(state):
+    """Summarise a state file (.h5)."""
+    from demcli.state import summarize
+
+    click.echo(summarize(state))
+
+
+@cli.command()
+def warmup():
+    """Compile (and cache) the engine kernels by running a tiny scene."""
+    from demcli.check import warmup as _warmup
+
+    click.echo(_warmup())
+
+
+def main(argv=None):
+    """Entry point of the ``demcli`` console script."""
+    return cli.main(args=argv, prog_name="demcli", standalone_mode=True)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

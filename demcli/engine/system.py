@@ -1,0 +1,311 @@
+"""A scene in memory: structure-of-arrays state, plan, and the compiled step loop.
+
+:class:`System` is built from a state's groups (see docs/state.md), a stage's contact
+model, effects and walls. It owns every array the kernels touch and allocates only
+what the plan asks for (inactive effects get size-0 placeholders).
+"""
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from demcli.engine.materials import LAWS, critical_time_step, pair_table
+from demcli.kernels import layout as K
+from demcli.kernels.walls import N_WPARAMS
+
+_EMPTY_I = np.empty(0, np.int64)
+
+
+def _empty2(cols):
+    return np.zeros((0, cols))
+
+
+@dataclass
+class Walls:
+    """Rigid walls of a stage (SI). ``prm`` rows hold the W_* control parameters."""
+
+    name: list = field(default_factory=list)
+    kind: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int8))
+    point: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    normal: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    radius: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    v: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    material: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    control: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int8))
+    prm: np.ndarray = field(default_factory=lambda: np.zeros((0, N_WPARAMS)))
+    extent: np.ndarray = field(default_factory=lambda: np.zeros((0, 6)))
+
+    def __len__(self):
+        return len(self.kind)
+
+
+@dataclass(frozen=True)
+class Dynamics:
+    """Stage-level numbers the kernel needs besides the arrays (SI)."""
+
+    gravity: tuple = (0.0, 0.0, -9.81)
+    local_damping: float = 0.0
+    viscous_damping: float = 0.0
+    skin: float = 0.3              # Verlet skin as a fraction of the mean sphere radius
+    check_every: int = 100         # steps between guard checks
+    overlap_limit: float = 0.5     # largest overlap / smaller radius before the run stops
+    energy_limit: float = 1e3      # kinetic energy may not exceed this times the reference energy
+
+
+class System:
+    """Arrays and kernels of one stage.
+
+    Args:
+        groups: state groups ``bodies``, ``spheres`` and optional ``contacts``,
+            ``wall_contacts``, ``energy``.
+        materials: list of :class:`~demcli.engine.materials.Material`.
+        model: :class:`~demcli.engine.materials.ContactModel`.
+        plan: :class:`~demcli.engine.plan.Plan`.
+        walls: :class:`Walls`.
+        dynamics: :class:`Dynamics`.
+        dt: time step [s].
+        time, step: clock of the input state.
+    """
+
+    def __init__(self, groups, materials, model, plan, walls, dynamics, dt, time=0.0, step=0):
+        self.plan = plan
+        self.materials = list(materials)
+        self.model = model
+        self.walls = walls
+        self.dyn = dynamics
+        self.dt = float(dt)
+        self.time = float(time)
+        self.step = int(step)
+        self.law = LAWS[model.law]
+        self.flags = plan.flags
+        self.prm = pair_table(self.materials, model)
+        b = groups["bodies"]
+        s = groups["spheres"]
+        self.body_id = np.ascontiguousarray(b["id"], np.int64)
+        self.x = np.ascontiguousarray(b["x"], np.float64).copy()
+        self.v = np.ascontiguousarray(b["v"], np.float64).copy()
+        self.w = np.ascontiguousarray(b["omega"], np.float64).copy()
+        self.q = np.ascontiguousarray(b["q"], np.float64).copy()
+        self.mass = np.ascontiguousarray(b["mass"], np.float64)
+        self.inert = np.ascontiguousarray(b["inertia"], np.float64)
+        self.bflags = np.ascontiguousarray(b["flags"], np.int8)
+        nb = len(self.mass)
+        self.f = np.ascontiguousarray(b.get("force", np.zeros((nb, 3))), np.float64).copy()
+        self.tq = np.ascontiguousarray(b.get("torque", np.zeros((nb, 3))), np.float64).copy()
+        self.clumps = self.flags[K.F_CLUMPS]
+        self.sbody = np.ascontiguousarray(s["body"], np.int64)
+        self.soff = np.ascontiguousarray(s["offset"], np.float64)
+        self.rad = np.ascontiguousarray(s["radius"], np.float64)
+        self.smat = np.ascontiguousarray(s["material"], np.int64)
+        ns = len(self.rad)
+        if self.clumps:
+            self.L = np.ascontiguousarray(b["angmom"], np.float64).copy() if "angmom" in b \
+                else self._angmom_from_omega()
+            self.xs = np.zeros((ns, 3))
+            self.vs = np.zeros((ns, 3))
+            self.ws = np.zeros((ns, 3))
+            self.fs = np.zeros((ns, 3))
+            self.ts = np.zeros((ns, 3))
+            order = np.argsort(self.sbody, kind="stable")
+            self.mstart = np.searchsorted(self.sbody[order], np.arange(nb + 1)).astype(np.int64)
+            self.mlist = order.astype(np.int64)
+            self._place_members()
+        else:
+            if ns != nb or not np.array_equal(self.sbody, np.arange(nb)):
+                raise ValueError("a spheres-only scene needs sphere i to be body i")
+            self.L = _empty2(3)
+            self.xs, self.vs, self.ws, self.fs, self.ts = self.x, self.v, self.w, self.f, self.tq
+            self.mstart = np.zeros(1, np.int64)
+            self.mlist = _EMPTY_I
+        self.smass = np.ascontiguousarray(self.mass[self.sbody])
+        self.wforce = np.zeros((len(walls), 3))
+        self.wkn = np.zeros(len(walls))
+        self.wpoint = np.ascontiguousarray(walls.point, np.float64).copy()
+        self.wpoint0 = self.wpoint.copy()
+        self.wv = np.ascontiguousarray(walls.v, np.float64).copy()
+        energy = plan.has("energy")
+        eg = groups.get("energy", {})
+        self.esph = np.zeros((ns if energy else 0, 2))
+        self.ebody = np.zeros(nb if energy else 0)
+        self.eacc = np.zeros(1)
+        self.losses0 = {k: float(np.asarray(eg.get(k, 0.0))) for k in ("damping", "friction", "body_damping", "wall_work")}
+        self.counters = np.zeros(K.N_COUNTERS, np.int64)
+        self.info = np.zeros(4)
+        self.nl = self._initial_lists(groups)
+        self.skin = self.dyn.skin * float(self.rad.mean()) if ns else 0.0
+        self.max_cells = max(64, 8 * ns)
+        self._fresh_lists = True
+        self.gravity = np.asarray(dynamics.gravity, np.float64)
+        self.ke_limit = math.inf
+
+    # ---- set-up helpers -------------------------------------------------------------
+    def _angmom_from_omega(self):
+        """L = R diag(I) R^T omega for each body (world frame)."""
+        from scipy.spatial.transform import Rotation
+
+        rot = Rotation.from_quat(self.q[:, [1, 2, 3, 0]])  # scipy: scalar last
+        wb = rot.inv().apply(self.w)
+        return np.ascontiguousarray(rot.apply(wb * self.inert))
+
+    def _place_members(self):
+        from scipy.spatial.transform import Rotation
+
+        rot = Rotation.from_quat(self.q[:, [1, 2, 3, 0]])
+        off = rot[self.sbody].apply(self.soff) if len(self.sbody) else np.zeros((0, 3))
+        self.xs[:] = self.x[self.sbody] + off
+        self.vs[:] = self.v[self.sbody] + np.cross(self.w[self.sbody], off)
+        self.ws[:] = self.w[self.sbody]
+
+    def _initial_lists(self, groups):
+        """Neighbour state seeded with the stored contacts (for history carry-over)."""
+        ns = len(self.rad)
+        friction = self.flags[K.F_FRICTION]
+        rolling = self.flags[K.F_ROLLING]
+        c = groups.get("contacts", {})
+        ci = np.asarray(c.get("i", _EMPTY_I), np.int64)
+        cj = np.asarray(c.get("j", _EMPTY_I), np.int64)
+        order = np.lexsort((cj, ci))
+        ci, cj = ci[order], cj[order]
+        start = np.searchsorted(ci, np.arange(ns + 1)).astype(np.int64)
+        ft = np.ascontiguousarray(c["ft"][order]) if friction and "ft" in c else np.zeros((len(ci) if friction else 0, 3))
+        mr = np.ascontiguousarray(c["mr"][order]) if rolling and "mr" in c else np.zeros((len(ci) if rolling else 0, 3))
+        wc = groups.get("wall_contacts", {})
+        ws_ = np.asarray(wc.get("sphere", _EMPTY_I), np.int64)
+        ww = np.asarray(wc.get("wall", _EMPTY_I), np.int64)
+        order = np.lexsort((ww, ws_))
+        ws_, ww = ws_[order], ww[order]
+        wstart = np.searchsorted(ws_, np.arange(ns + 1)).astype(np.int64)
+        wft = np.ascontiguousarray(wc["ft"][order]) if friction and "ft" in wc else np.zeros((len(ww) if friction else 0, 3))
+        wmr = np.ascontiguousarray(wc["mr"][order]) if rolling and "mr" in wc else np.zeros((len(ww) if rolling else 0, 3))
+        return (start, np.ascontiguousarray(ci), np.ascontiguousarray(cj), np.zeros(ns + 1, np.int64), _EMPTY_I,
+                ft, mr, _empty2(3), _empty2(3), _empty2(3), np.zeros(len(ci), np.uint8), _empty2(2),
+                wstart, np.ascontiguousarray(ws_), np.ascontiguousarray(ww), wft, wmr, np.zeros((len(ww), 4)),
+                self.xs.copy(), np.zeros((len(self.walls), 3)))
+
+    # ---- time stepping --------------------------------------------------------------
+    def critical_dt(self):
+        """Critical time step of this scene [s] (see :func:`critical_time_step`)."""
+        return critical_time_step(self.model, self.prm, self.materials, self.mass, self.rad, self.sbody, self.smat)
+
+    def advance(self, nsteps):
+        """Run ``nsteps`` steps in compiled code; returns (status, steps done)."""
+        from demcli.kernels.step import run_steps
+
+        w = self.walls
+        status, done, self.time, self.nl = run_steps(
+            int(nsteps), self.time, self.dt, self.law, self.flags, self.prm, self.gravity,
+            float(self.dyn.local_damping), float(self.dyn.viscous_damping),
+            (self.x, self.v, self.w, self.q, self.L, self.f, self.tq), self.mass, self.inert, self.bflags,
+            (self.xs, self.vs, self.ws, self.fs, self.ts), self.rad, self.smat, self.smass, self.sbody,
+            self.soff, self.mstart, self.mlist,
+            w.kind, self.wpoint, w.normal, w.radius, self.wv, w.material, w.control, w.prm,
+            self.wforce, self.wkn,
+            self.nl, self.skin, self.max_cells,
+            self.esph, self.ebody, self.eacc,
+            int(self.dyn.check_every), float(self.dyn.overlap_limit), float(self.ke_limit),
+            self.counters, self.info, self._fresh_lists)
+        self._fresh_lists = False
+        self.step += int(done)
+        return int(status), int(done)
+
+    # ---- measures -------------------------------------------------------------------
+    def kinetic_energy(self):
+        """Translational plus rotational kinetic energy [J] (fixed summation order)."""
+        ke = 0.5 * float(np.sum(self.mass * np.einsum("ij,ij->i", self.v, self.v)))
+        if self.clumps:
+            ke += 0.5 * float(np.sum(np.einsum("ij,ij->i", self.w, self.L)))
+        else:
+            ke += 0.5 * float(np.sum(self.inert[:, 0] * np.einsum("ij,ij->i", self.w, self.w)))
+        return ke
+
+    def gravity_potential(self):
+        """-sum m g.x [J] (zero at the origin)."""
+        return -float(np.sum(self.mass * (self.x @ self.gravity))) if self.plan.has("gravity") else 0.0
+
+    def strain_energy(self):
+        from demcli.kernels.step import total_strain_energy
+
+        nl = self.nl
+        w = self.walls
+        return float(total_strain_energy(
+            nl[1], nl[2], self.xs, self.rad, self.smat, self.prm, self.law, nl[5], nl[6],
+            self.flags[K.F_FRICTION], self.flags[K.F_ROLLING], nl[12], nl[14], w.kind, self.wpoint,
+            w.normal, w.radius, w.material, nl[15], nl[16]))
+
+    def losses(self):
+        """Cumulative energy [J]: contact dashpots, slip, body damping, and work done by walls."""
+        d = dict(self.losses0)
+        if self.plan.has("energy"):
+            d["damping"] += float(self.esph[:, 0].sum())
+            d["friction"] += float(self.esph[:, 1].sum())
+            d["body_damping"] += float(self.ebody.sum())
+            d["wall_work"] += float(self.eacc[0])
+        return d
+
+    def energy_record(self):
+        """Energy terms and the balance error E_k + E_s + E_g + losses - wall work [J]."""
+        rec = {"kinetic": self.kinetic_energy(), "strain": self.strain_energy(),
+               "gravity": self.gravity_potential()}
+        rec.update(self.losses())
+        rec["total"] = (rec["kinetic"] + rec["strain"] + rec["gravity"] + rec["damping"] + rec["friction"]
+                        + rec["body_damping"] - rec["wall_work"])
+        return rec
+
+    def contact_count(self):
+        """(sphere-sphere contacts, sphere-wall contacts) touching now."""
+        nl = self.nl
+        n_pp = int(nl[10].sum())
+        wfc = nl[17]
+        n_pw = int(np.count_nonzero(np.any(wfc[:, :3] != 0.0, axis=1))) if len(wfc) else 0
+        return n_pp, n_pw
+
+    # ---- state exchange -------------------------------------------------------------
+    def snapshot(self):
+        """Copies of everything the step loop mutates (to restore the last good state)."""
+        return {k: (tuple(a.copy() for a in getattr(self, k)) if k == "nl" else
+                    getattr(self, k).copy() if isinstance(getattr(self, k), np.ndarray) else getattr(self, k))
+                for k in ("x", "v", "w", "q", "L", "f", "tq", "xs", "vs", "ws", "fs", "ts", "wpoint", "wv",
+                          "wforce", "esph", "ebody", "eacc", "nl", "time", "step")}
+
+    def restore(self, snap):
+        for k, val in snap.items():
+            cur = getattr(self, k)
+            if isinstance(cur, np.ndarray):
+                cur[...] = val
+            else:
+                setattr(self, k, val)
+        self._fresh_lists = True
+
+    def groups(self):
+        """State groups of the current scene (bodies, spheres, contacts, walls, energy)."""
+        nl = self.nl
+        act = nl[10].astype(bool)
+        contacts = {"i": nl[1][act].copy(), "j": nl[2][act].copy(), "force": nl[7][act].copy()}
+        if self.flags[K.F_FRICTION]:
+            contacts["ft"] = nl[5][act].copy()
+        if self.flags[K.F_ROLLING]:
+            contacts["mr"] = nl[6][act].copy()
+        wfc = nl[17]
+        wact = np.any(wfc[:, :3] != 0.0, axis=1) if len(wfc) else np.zeros(0, bool)
+        wall_contacts = {"sphere": nl[13][wact].copy(), "wall": nl[14][wact].copy(), "force": wfc[wact, :3].copy()}
+        if self.flags[K.F_FRICTION]:
+            wall_contacts["ft"] = nl[15][wact].copy()
+        if self.flags[K.F_ROLLING]:
+            wall_contacts["mr"] = nl[16][wact].copy()
+        bodies = {"x": self.x.copy(), "v": self.v.copy(), "q": self.q.copy(), "omega": self.w.copy(),
+                  "mass": self.mass.copy(), "inertia": self.inert.copy(), "id": self.body_id.copy(),
+                  "flags": self.bflags.copy(), "force": self.f.copy(), "torque": self.tq.copy()}
+        if self.clumps:
+            bodies["angmom"] = self.L.copy()
+        spheres = {"body": self.sbody.copy(), "offset": self.soff.copy(), "radius": self.rad.copy(),
+                   "material": self.smat.copy()}
+        w = self.walls
+        walls = {"name": np.array(w.name, dtype=object), "kind": w.kind.copy(), "point": self.wpoint.copy(),
+                 "normal": w.normal.copy(), "radius": w.radius.copy(), "v": self.wv.copy(),
+                 "material": w.material.copy(), "control": w.control.copy(), "target": w.prm[:, 0].copy(),
+                 "force": self.wforce.copy(),
+                 "extent": w.extent + np.tile(self.wpoint - self.wpoint0, 2)}
+        energy = {k: np.float64(v) for k, v in self.losses().items()}
+        return {"bodies": bodies, "spheres": spheres, "contacts": contacts, "wall_contacts": wall_contacts,
+                "walls": walls, "energy": energy}

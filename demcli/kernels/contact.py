@@ -1,0 +1,206 @@
+"""Contact laws for sphere-sphere and sphere-wall contacts (pure scalar kernels).
+
+One function, :func:`contact_law`, evaluates the normal, tangential and rolling parts
+of one contact from its geometry and relative motion, and updates the contact's
+history in place. It is inlined into the pair pass and the wall pass.
+
+Laws (``law`` argument):
+
+* ``LINEAR`` -- linear spring-dashpot (Cundall & Strack 1979):
+  F_n = k_n delta - c_n v_n, with c_n = c_abs + 2 zeta sqrt(m* k_n);
+  zeta = -ln e / sqrt(pi^2 + ln^2 e) gives the restitution coefficient e for an
+  isolated pair (contact ends when delta returns to 0, tension allowed).
+* ``HERTZ`` -- Hertz-Mindlin with Tsuji-type damping (as in LIGGGHTS ``hertz``):
+  F_n = 4/3 E* sqrt(R*) delta^(3/2) - 2 sqrt(5/6) beta sqrt(S_n m*) v_n,
+  S_n = 2 E* sqrt(R* delta), k_t = S_t = 8 G* sqrt(R* delta),
+  beta = -ln e / sqrt(pi^2 + ln^2 e).
+
+Tangential (when friction is active): incremental spring dF_t = -k_t v_t dt with the
+history rotated into the current tangent plane (magnitude kept), optional dashpot
+c_t = ratio * c_n, Coulomb limit |F_t| <= mu max(F_n, 0) (the stored spring is scaled
+back to the limit).
+
+Rolling resistance (when active): elastic-plastic spring (Ai, Chen, Rotter & Ooi 2011,
+model C without the viscous term): dM_r = -k_r omega_rel,t dt, k_r = 2.25 k_n mu_r^2 R*^2,
+|M_r| <= mu_r R* max(F_n, 0).
+
+Sign convention: n points from j to i, ``v`` is the velocity of i's contact point
+relative to j's, the returned force and moment act on i (minus on j).
+"""
+
+import math
+
+from demcli.jit import njit
+
+LINEAR = 0
+HERTZ = 1
+
+# columns of the material-pair table prm[a, b, :]
+P_KN = 0      # linear normal stiffness [N/m]
+P_KT = 1      # linear tangential stiffness [N/m]
+P_CN = 2      # absolute normal damping coefficient [N s/m]
+P_ZETA = 3    # damping ratio from restitution [-] (linear and Hertz)
+P_MU = 4      # Coulomb friction coefficient [-]
+P_MUR = 5     # rolling friction coefficient [-]
+P_ESTAR = 6   # effective Young's modulus E* [Pa]
+P_GSTAR = 7   # effective shear modulus G* [Pa]
+P_CTR = 8     # tangential / normal damping ratio [-]
+N_PARAMS = 9
+
+_SQRT_5_6 = math.sqrt(5.0 / 6.0)
+
+
+@njit(inline="always")
+def contact_law(law, prm, delta, nx, ny, nz, vx, vy, vz, wx, wy, wz, rstar, mstar, dt,
+                ft, mr, k, friction, rolling):
+    """Force and rolling moment on i for one contact.
+
+    Args:
+        law: LINEAR or HERTZ.
+        prm: (N_PARAMS,) float64 material-pair row.
+        delta: overlap [m], > 0.
+        nx, ny, nz: unit normal from j to i.
+        vx, vy, vz: contact-point velocity of i relative to j [m/s].
+        wx, wy, wz: angular velocity of i relative to j [rad/s] (rolling only).
+        rstar, mstar: effective radius [m] and mass [kg].
+        dt: time step [s].
+        ft: (n, 3) tangential spring forces [N], row k updated in place.
+        mr: (n, 3) rolling moments [N m], row k updated in place (rolling only).
+        k: history row.
+        friction, rolling: effect switches.
+
+    Returns:
+        (fx, fy, fz, mx, my, mz, e_damp, e_fric): force [N] and rolling moment [N m]
+        on i, energy dissipated this step by dashpots and by slip [J].
+    """
+    vn = vx * nx + vy * ny + vz * nz
+    if law == HERTZ:
+        sq = math.sqrt(rstar * delta)
+        kn_tan = 2.0 * prm[P_ESTAR] * sq
+        kn = kn_tan * (2.0 / 3.0)
+        cn = 2.0 * _SQRT_5_6 * prm[P_ZETA] * math.sqrt(kn_tan * mstar)
+        kt = 8.0 * prm[P_GSTAR] * sq
+        ct = prm[P_CTR] * 2.0 * _SQRT_5_6 * prm[P_ZETA] * math.sqrt(kt * mstar)
+    else:
+        kn = prm[P_KN]
+        kn_tan = kn
+        cn = prm[P_CN] + 2.0 * prm[P_ZETA] * math.sqrt(mstar * kn)
+        kt = prm[P_KT]
+        ct = prm[P_CTR] * cn
+    fn = kn * delta - cn * vn
+    e_damp = cn * vn * vn * dt
+    e_fric = 0.0
+    fx = fn * nx
+    fy = fn * ny
+    fz = fn * nz
+    fpos = fn if fn > 0.0 else 0.0
+    if friction:
+        vtx = vx - vn * nx
+        vty = vy - vn * ny
+        vtz = vz - vn * nz
+        hx = ft[k, 0]
+        hy = ft[k, 1]
+        hz = ft[k, 2]
+        h0 = hx * hx + hy * hy + hz * hz
+        if h0 > 0.0:
+            hn = hx * nx + hy * ny + hz * nz
+            hx -= hn * nx
+            hy -= hn * ny
+            hz -= hn * nz
+            h1 = hx * hx + hy * hy + hz * hz
+            if h1 > 0.0:
+                s = math.sqrt(h0 / h1)
+                hx *= s
+                hy *= s
+                hz *= s
+        hx -= kt * vtx * dt
+        hy -= kt * vty * dt
+        hz -= kt * vtz * dt
+        tx = hx - ct * vtx
+        ty = hy - ct * vty
+        tz = hz - ct * vtz
+        lim = prm[P_MU] * fpos
+        tmag2 = tx * tx + ty * ty + tz * tz
+        if tmag2 > lim * lim:
+            tmag = math.sqrt(tmag2)
+            s = lim / tmag
+            tx *= s
+            ty *= s
+            tz *= s
+            e_fric = (tmag - lim) * lim / kt if kt > 0.0 else 0.0
+            hx = tx
+            hy = ty
+            hz = tz
+        else:
+            e_damp += ct * (vtx * vtx + vty * vty + vtz * vtz) * dt
+        ft[k, 0] = hx
+        ft[k, 1] = hy
+        ft[k, 2] = hz
+        fx += tx
+        fy += ty
+        fz += tz
+    mx = 0.0
+    my = 0.0
+    mz = 0.0
+    if rolling:
+        wn = wx * nx + wy * ny + wz * nz
+        wtx = wx - wn * nx
+        wty = wy - wn * ny
+        wtz = wz - wn * nz
+        mur = prm[P_MUR]
+        kr = 2.25 * kn_tan * mur * mur * rstar * rstar
+        ax = mr[k, 0]
+        ay = mr[k, 1]
+        az = mr[k, 2]
+        a0 = ax * ax + ay * ay + az * az
+        if a0 > 0.0:
+            an = ax * nx + ay * ny + az * nz
+            ax -= an * nx
+            ay -= an * ny
+            az -= an * nz
+            a1 = ax * ax + ay * ay + az * az
+            if a1 > 0.0:
+                s = math.sqrt(a0 / a1)
+                ax *= s
+                ay *= s
+                az *= s
+        ax -= kr * wtx * dt
+        ay -= kr * wty * dt
+        az -= kr * wtz * dt
+        lim = mur * rstar * fpos
+        amag2 = ax * ax + ay * ay + az * az
+        if amag2 > lim * lim:
+            amag = math.sqrt(amag2)
+            s = lim / amag
+            e_fric += (amag - lim) * lim / kr if kr > 0.0 else 0.0
+            ax *= s
+            ay *= s
+            az *= s
+        mr[k, 0] = ax
+        mr[k, 1] = ay
+        mr[k, 2] = az
+        mx = ax
+        my = ay
+        mz = az
+    return fx, fy, fz, mx, my, mz, e_damp, e_fric
+
+
+@njit(inline="always")
+def strain_energy(law, prm, delta, rstar, ft, mr, k, friction, rolling):
+    """Elastic energy stored in one contact [J] (normal + tangential + rolling springs)."""
+    if law == HERTZ:
+        sq = math.sqrt(rstar * delta)
+        e = 0.4 * (4.0 / 3.0) * prm[P_ESTAR] * sq * delta * delta
+        kn_tan = 2.0 * prm[P_ESTAR] * sq
+        kt = 8.0 * prm[P_GSTAR] * sq
+    else:
+        e = 0.5 * prm[P_KN] * delta * delta
+        kn_tan = prm[P_KN]
+        kt = prm[P_KT]
+    if friction and kt > 0.0:
+        e += 0.5 * (ft[k, 0] ** 2 + ft[k, 1] ** 2 + ft[k, 2] ** 2) / kt
+    if rolling:
+        kr = 2.25 * kn_tan * prm[P_MUR] ** 2 * rstar * rstar
+        if kr > 0.0:
+            e += 0.5 * (mr[k, 0] ** 2 + mr[k, 1] ** 2 + mr[k, 2] ** 2) / kr
+    return e

@@ -1,0 +1,216 @@
+"""Verlet neighbour lists built on a cell grid, with contact history carried over.
+
+A pair list holds every sphere pair (i < j, different bodies) whose surfaces are
+closer than ``skin``. Pairs are stored in CSR form by i (``start``), and inside each
+row sorted by j. Sorting makes the list canonical: the force sums built from it do
+not depend on when the list was rebuilt, so a resumed run and an uninterrupted one
+give bit-identical results. ``rstart``/``rlist`` give, for each sphere, the pairs in
+which it is the second member (in increasing pair order), for the per-sphere gather.
+
+The wall list holds (sphere, wall) pairs closer than ``skin``, CSR by sphere, sorted
+by wall.
+"""
+
+import math
+
+import numpy as np
+from numba import prange
+
+from demcli.jit import njit
+from demcli.kernels.walls import wall_distance
+
+
+@njit
+def _grid(xs, rad, skin, max_cells):
+    """Bounds and cell counts of a grid whose cells are at least 2 r_max + skin wide."""
+    n = xs.shape[0]
+    lo = np.empty(3)
+    hi = np.empty(3)
+    for d in range(3):
+        lo[d] = xs[0, d]
+        hi[d] = xs[0, d]
+    rmax = 0.0
+    for i in range(n):
+        for d in range(3):
+            if xs[i, d] < lo[d]:
+                lo[d] = xs[i, d]
+            if xs[i, d] > hi[d]:
+                hi[d] = xs[i, d]
+        if rad[i] > rmax:
+            rmax = rad[i]
+    h = 2.0 * rmax + skin
+    nc = np.empty(3, np.int64)
+    while True:
+        tot = 1
+        for d in range(3):
+            nc[d] = max(1, int(math.floor((hi[d] - lo[d]) / h)) + 1)
+            tot *= nc[d]
+        if tot <= max_cells:
+            break
+        h *= 1.26
+    return lo, 1.0 / h, nc
+
+
+@njit
+def _bin(xs, lo, inv_h, nc):
+    """Counting sort of spheres into cells: (cell_start, cell_items)."""
+    n = xs.shape[0]
+    ncell = nc[0] * nc[1] * nc[2]
+    cell_of = np.empty(n, np.int64)
+    cnt = np.zeros(ncell + 1, np.int64)
+    for i in range(n):
+        cx = min(nc[0] - 1, int((xs[i, 0] - lo[0]) * inv_h))
+        cy = min(nc[1] - 1, int((xs[i, 1] - lo[1]) * inv_h))
+        cz = min(nc[2] - 1, int((xs[i, 2] - lo[2]) * inv_h))
+        c = cx + nc[0] * (cy + nc[1] * cz)
+        cell_of[i] = c
+        cnt[c + 1] += 1
+    for c in range(ncell):
+        cnt[c + 1] += cnt[c]
+    items = np.empty(n, np.int64)
+    fill = cnt[:-1].copy()
+    for i in range(n):
+        c = cell_of[i]
+        items[fill[c]] = i
+        fill[c] += 1
+    return cnt, items
+
+
+@njit(parallel=True)
+def _scan_pairs(xs, rad, body, skin, lo, inv_h, nc, cell_start, items, start, pj, fill):
+    """Count (fill=False) or write (fill=True) the j > i neighbours of every sphere."""
+    n = xs.shape[0]
+    for i in prange(n):
+        xi = xs[i, 0]
+        yi = xs[i, 1]
+        zi = xs[i, 2]
+        ri = rad[i] + skin
+        bi = body[i]
+        cx = min(nc[0] - 1, int((xi - lo[0]) * inv_h))
+        cy = min(nc[1] - 1, int((yi - lo[1]) * inv_h))
+        cz = min(nc[2] - 1, int((zi - lo[2]) * inv_h))
+        k = start[i] if fill else 0
+        for zz in range(max(cz - 1, 0), min(cz + 2, nc[2])):
+            for yy in range(max(cy - 1, 0), min(cy + 2, nc[1])):
+                for xx in range(max(cx - 1, 0), min(cx + 2, nc[0])):
+                    c = xx + nc[0] * (yy + nc[1] * zz)
+                    for a in range(cell_start[c], cell_start[c + 1]):
+                        j = items[a]
+                        if j <= i or body[j] == bi:
+                            continue
+                        dx = xs[j, 0] - xi
+                        dy = xs[j, 1] - yi
+                        dz = xs[j, 2] - zi
+                        cut = ri + rad[j]
+                        if dx * dx + dy * dy + dz * dz < cut * cut:
+                            if fill:
+                                pj[k] = j
+                            k += 1
+        if fill:
+            # insertion sort of the row by j: canonical order
+            s0 = start[i]
+            for a in range(s0 + 1, k):
+                v = pj[a]
+                b = a - 1
+                while b >= s0 and pj[b] > v:
+                    pj[b + 1] = pj[b]
+                    b -= 1
+                pj[b + 1] = v
+        else:
+            start[i + 1] = k
+
+
+@njit
+def build_pairs(xs, rad, body, skin, max_cells):
+    """Verlet pair list: (start (n+1,), pi (P,), pj (P,)) in canonical order."""
+    n = xs.shape[0]
+    start = np.zeros(n + 1, np.int64)
+    if n == 0:
+        return start, np.empty(0, np.int64), np.empty(0, np.int64)
+    lo, inv_h, nc = _grid(xs, rad, skin, max_cells)
+    cell_start, items = _bin(xs, lo, inv_h, nc)
+    dummy = np.empty(0, np.int64)
+    _scan_pairs(xs, rad, body, skin, lo, inv_h, nc, cell_start, items, start, dummy, False)
+    for i in range(n):
+        start[i + 1] += start[i]
+    npair = start[n]
+    pj = np.empty(npair, np.int64)
+    _scan_pairs(xs, rad, body, skin, lo, inv_h, nc, cell_start, items, start, pj, True)
+    pi = np.empty(npair, np.int64)
+    for i in range(n):
+        for c in range(start[i], start[i + 1]):
+            pi[c] = i
+    return start, pi, pj
+
+
+@njit
+def build_reverse(n, pj):
+    """For each sphere, the pairs in which it is j: (rstart (n+1,), rlist (P,))."""
+    rstart = np.zeros(n + 1, np.int64)
+    for c in range(pj.shape[0]):
+        rstart[pj[c] + 1] += 1
+    for i in range(n):
+        rstart[i + 1] += rstart[i]
+    fill = rstart[:-1].copy()
+    rlist = np.empty(pj.shape[0], np.int64)
+    for c in range(pj.shape[0]):
+        j = pj[c]
+        rlist[fill[j]] = c
+        fill[j] += 1
+    return rstart, rlist
+
+
+@njit(parallel=True)
+def carry_history(n, start_new, key_new, start_old, key_old, hist_old, hist_new):
+    """Copy history rows of pairs present in both lists (rows sorted by key); zero others."""
+    if hist_old.shape[0] == 0 and hist_new.shape[0] == 0:
+        return
+    for i in prange(n):
+        a = start_old[i]
+        a1 = start_old[i + 1]
+        for c in range(start_new[i], start_new[i + 1]):
+            key = key_new[c]
+            while a < a1 and key_old[a] < key:
+                a += 1
+            if a < a1 and key_old[a] == key:
+                for d in range(hist_new.shape[1]):
+                    hist_new[c, d] = hist_old[a, d]
+            else:
+                for d in range(hist_new.shape[1]):
+                    hist_new[c, d] = 0.0
+
+
+@njit(parallel=True)
+def _scan_walls(xs, rad, skin, wkind, wpoint, wnormal, wradius, start, wall, fill):
+    n = xs.shape[0]
+    nw = wkind.shape[0]
+    for i in prange(n):
+        k = start[i] if fill else 0
+        for w in range(nw):
+            s, _, _, _ = wall_distance(wkind[w], wpoint[w, 0], wpoint[w, 1], wpoint[w, 2],
+                                       wnormal[w, 0], wnormal[w, 1], wnormal[w, 2], wradius[w],
+                                       xs[i, 0], xs[i, 1], xs[i, 2])
+            if s < rad[i] + skin:
+                if fill:
+                    wall[k] = w
+                k += 1
+        if not fill:
+            start[i + 1] = k
+
+
+@njit
+def build_wall_pairs(xs, rad, skin, wkind, wpoint, wnormal, wradius):
+    """Sphere-wall list: (wstart (n+1,), wsphere (Q,), wwall (Q,)), sorted by sphere then wall."""
+    n = xs.shape[0]
+    start = np.zeros(n + 1, np.int64)
+    dummy = np.empty(0, np.int64)
+    _scan_walls(xs, rad, skin, wkind, wpoint, wnormal, wradius, start, dummy, False)
+    for i in range(n):
+        start[i + 1] += start[i]
+    wall = np.empty(start[n], np.int64)
+    _scan_walls(xs, rad, skin, wkind, wpoint, wnormal, wradius, start, wall, True)
+    sph = np.empty(start[n], np.int64)
+    for i in range(n):
+        for c in range(start[i], start[i + 1]):
+            sph[c] = i
+    return start, sph, wall

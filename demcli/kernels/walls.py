@@ -1,0 +1,54 @@
+"""Rigid wall geometry: signed distance from a sphere centre to a wall surface.
+
+Kinds: ``PLANE`` (infinite plane through ``point`` with unit ``normal`` pointing into
+the domain) and ``CYLINDER`` (inside of a cylinder of ``radius`` around the axis through
+``point`` with unit direction ``normal``). Walls translate with velocity ``v``; they do
+not rotate. A wall's normal motion is controlled by ``control[w]`` and the
+parameter row ``wprm[w, :]`` (columns ``W_*`` below).
+"""
+
+import math
+
+from demcli.jit import njit
+
+PLANE = 0
+CYLINDER = 1
+
+# wall control modes
+FIXED = 0
+VELOCITY = 1
+FORCE = 2
+SERVO = 3
+
+# columns of wprm[w, :]
+W_TARGET = 0      # FORCE: applied force [N] along -normal; SERVO: target stress [Pa]
+W_AMPLITUDE = 1   # FORCE: sinusoidal amplitude [N]
+W_FREQ = 2        # FORCE: frequency [Hz]
+W_MASS = 3        # FORCE: wall mass [kg]
+W_GAIN = 4        # SERVO: relaxation factor alpha in (0, 1] (PFC servo gain G = alpha A / (sum k_n dt))
+W_VMAX = 5        # SERVO: speed limit [m/s]
+W_AREA = 6        # SERVO: loaded area [m^2]
+N_WPARAMS = 7
+
+
+@njit(inline="always")
+def wall_distance(kind, px, py, pz, ax, ay, az, radius, x, y, z):
+    """Distance s from a point to the wall surface and the unit normal from wall to point.
+
+    Returns (s, nx, ny, nz); a sphere of radius r touches the wall when s < r.
+    """
+    dx = x - px
+    dy = y - py
+    dz = z - pz
+    if kind == PLANE:
+        return dx * ax + dy * ay + dz * az, ax, ay, az
+    # cylinder, inside: radial vector from the axis
+    t = dx * ax + dy * ay + dz * az
+    rx = dx - t * ax
+    ry = dy - t * ay
+    rz = dz - t * az
+    rho = math.sqrt(rx * rx + ry * ry + rz * rz)
+    if rho < 1e-300:
+        return radius, 1.0, 0.0, 0.0
+    inv = 1.0 / rho
+    return radius - rho, -rx * inv, -ry * inv, -rz * inv

@@ -1,0 +1,295 @@
+"""Run a case: its stages in order, each reading the previous stage's state.
+
+Outputs of a case live in one run folder (default ``runs/<case name>``)::
+
+    <NN>-<stage>.h5              the stage's state (atomic write)
+    <NN>-<stage>.ckpt.h5         checkpoint of an interrupted stage (``--resume``)
+    <NN>-<stage>.lastgood.h5     last good state of a stage stopped by a guard
+    <stage>/spheres.pvd, *.vtu   snapshots for ParaView
+    records/<stage>_<table>.csv  records, with PNG plots
+    log.txt                      one line per event, with wall time and throughput
+
+A stage is skipped when its state exists and records the same stage config hash and
+the same input-state hash (so editing one stage re-runs it and everything after it).
+"""
+
+import difflib
+import sys
+import time as _time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from demcli.errors import InputError, StageError
+
+
+@dataclass
+class StageResult:
+    name: str
+    path: Path
+    skipped: bool
+    wall_time: float
+    throughput: float = 0.0
+
+
+class Progress:
+    """Progress with rate and ETA on stderr: a live line on a terminal, else every 10 %."""
+
+    def __init__(self, label, total, start, quiet, nparticles):
+        self.label, self.total, self.start, self.quiet, self.np = label, total, start, quiet, nparticles
+        self.t0 = _time.perf_counter()
+        self.tty = sys.stderr.isatty()
+        self.last_print = self.t0
+        self.next_pct = 10
+
+    def update(self, step):
+        if self.quiet or self.total <= 0:
+            return
+        now = _time.perf_counter()
+        done = step - self.start
+        frac = step / self.total
+        rate = done / max(now - self.t0, 1e-9)
+        eta = (self.total - step) / rate if rate > 0 else float("inf")
+        text = (f"  {self.label}: {100 * frac:5.1f} %  step {step}/{self.total}  "
+                f"{rate * self.np:.3g} particle-steps/s  ETA {eta:.0f} s")
+        if self.tty:
+            if now - self.last_print > 0.2:
+                sys.stderr.write("\r" + text)
+                sys.stderr.flush()
+                self.last_print = now
+        elif 100 * frac >= self.next_pct:
+            sys.stderr.write(text + "\n")
+            self.next_pct = (int(100 * frac) // 10 + 1) * 10
+
+    def close(self):
+        if self.tty and not self.quiet:
+            sys.stderr.write("\r" + " " * 100 + "\r")
+            sys.stderr.flush()
+
+
+class StageContext:
+    """What a stage's run function may use: identity, RNG, logging and output helpers."""
+
+    def __init__(self, runner, index, cfg, config_hash, input_hash):
+        self.runner = runner
+        self.case = runner.case
+        self.index = index
+        self.name = cfg.name
+        self.type = cfg.type
+        self.cfg = cfg
+        self.config_hash = config_hash
+        self.input_hash = input_hash
+        self.seed = int(self.case.seed)
+        self.rng = np.random.Generator(np.random.PCG64(np.random.SeedSequence([self.seed, index])))
+        self.snapshot_dir = runner.run_dir / self.name
+        self.checkpoint_path = runner.run_dir / f"{index:02d}-{self.name}.ckpt.h5"
+        self.lastgood_path = runner.run_dir / f"{index:02d}-{self.name}.lastgood.h5"
+        self.throughput = 0.0
+
+    # ---- logging ----
+    def log(self, message):
+        self.runner.log(f"[{self.name}] {message}")
+
+    def progress(self, total, start):
+        n = getattr(self, "_nparticles", 1)
+        return Progress(self.name, total, start, self.runner.quiet, n)
+
+    # ---- states ----
+    def new_state(self, effects=(), time=0.0, step=0, dt=0.0):
+        from demcli.state import new_state
+
+        return new_state(self.name, self.type, dim=int(self.case.dimension), seed=self.seed,
+                         case_file=str(self.runner.case_path), case_hash=self.runner.case_hash,
+                         config_hash=self.config_hash, input_hash=self.input_hash, effects=sorted(effects),
+                         time=time, step=step, dt=dt)
+
+    def state_from(self, system, plan, extra=None):
+        """A State of the system's current scene (plus ``extra`` groups)."""
+        st = self.new_state(effects=plan.effects, time=system.time, step=system.step, dt=system.dt)
+        st.groups.update(system.groups())
+        if extra:
+            st.groups.update(extra)
+        return st
+
+    def load_checkpoint(self):
+        """The checkpoint of this stage when resuming and it matches this config and input."""
+        from demcli.state import read_state
+
+        if not self.runner.resume or not self.checkpoint_path.exists():
+            return None
+        st = read_state(self.checkpoint_path)
+        if st.meta.get("config_hash") != self.config_hash or st.meta.get("input_hash") != self.input_hash:
+            self.log("checkpoint is from another config or input; starting the stage afresh")
+            return None
+        return st
+
+    def write_checkpoint(self, state):
+        from demcli.state import set_rng, write_state
+
+        set_rng(state, self.rng)
+        self.runner.finish_state(state)
+        write_state(self.checkpoint_path, state)
+        self.log(f"checkpoint written: {self.checkpoint_path}")
+        return self.checkpoint_path
+
+    def fail(self, message, system, plan, last_good):
+        """Write the last good state and stop the stage with ``message``."""
+        from demcli.state import write_state
+
+        system.restore(last_good)
+        st = self.state_from(system, plan)
+        self.runner.finish_state(st)
+        write_state(self.lastgood_path, st)
+        self.log(message)
+        raise StageError(message, state_file=self.lastgood_path)
+
+    def write_records(self, table, x, ys, logy=False, suffix=None):
+        """CSV of a record table and a PNG of ``ys`` against ``x`` in ``records/``."""
+        folder = self.runner.run_dir / "records"
+        folder.mkdir(parents=True, exist_ok=True)
+        stem = f"{self.name}_{table.name}"
+        table.write_csv(folder / f"{stem}.csv")
+        png = folder / f"{stem}{'_' + suffix if suffix else ''}.png"
+        table.plot(png, x, ys, logy=logy, title=f"{self.runner.name}: {self.name}")
+
+
+class Runner:
+    """Runs the stages of one validated case."""
+
+    def __init__(self, case_path, overrides=(), out=None, quiet=False, resume=False):
+        from demcli.config.case import load_case
+        from demcli.config.schema import sha256_of
+
+        self.case_path = Path(case_path)
+        self.case = load_case(case_path, overrides)
+        self.name = self.case.name or self.case_path.stem
+        self.run_dir = Path(out) if out else Path("runs") / self.name
+        self.quiet = quiet
+        self.resume = resume
+        self.case_hash = sha256_of(self.case.to_dict())
+        self._shared = {k: self.case[k] for k in ("seed", "dimension", "thickness")}
+        self._shared["materials"] = self.case.materials.to_dict()
+        self._logfile = None
+
+    def log(self, message):
+        line = f"{_time.strftime('%H:%M:%S')} {message}"
+        if not self.quiet:
+            print(line, file=sys.stderr, flush=True)
+        if self._logfile is not None:
+            self._logfile.write(line + "\n")
+            self._logfile.flush()
+
+    def stage_index(self, name, option):
+        names = [s.name for s in self.case.stages]
+        if name not in names:
+            close = difflib.get_close_matches(name, names, n=1)
+            hint = f"; did you mean {close[0]!r}?" if close else f"; stages are {', '.join(names)}"
+            raise InputError(f"{option} {name}: no such stage in {self.case_path}{hint}")
+        return names.index(name)
+
+    def config_hash(self, cfg):
+        from demcli.config.schema import sha256_of
+
+        return sha256_of({"stage": cfg.to_dict(), "case": self._shared})
+
+    def finish_state(self, state):
+        """Materials of the case into a state about to be written."""
+        names = list(self.case.materials)
+        mats = self.case.materials
+        state.groups["materials"] = {
+            "name": np.array(names, dtype=object),
+            **{k: np.array([mats[n][k] for n in names], float)
+               for k in ("density", "young", "poisson", "friction", "rolling_friction", "restitution")}}
+
+    def output_path(self, k):
+        return self.run_dir / f"{k:02d}-{self.case.stages[k].name}.h5"
+
+    def run(self, from_stage=None, only=None, force=False):
+        from demcli.stages.base import STAGE_TYPES, load_stage_types
+        from demcli.state import read_meta, read_state, require, set_rng, state_hash, write_state
+
+        load_stage_types()
+        stages = self.case.stages
+        first = self.stage_index(from_stage, "--from") if from_stage else 0
+        only_k = self.stage_index(only, "--only") if only else None
+        self.run_dir.mkdir(parents=True, exist_ok=True)
+        self._logfile = open(self.run_dir / "log.txt", "a", encoding="utf-8")
+        results = []
+        try:
+            self.log(f"case {self.case_path} -> {self.run_dir}")
+            state_in, in_path = None, None
+            for k, cfg in enumerate(stages):
+                out_path = self.output_path(k)
+                st_type = STAGE_TYPES[cfg.type]
+                selected = (only_k is None and k >= first) or only_k == k
+                if not selected:
+                    in_path = out_path
+                    state_in = None
+                    continue
+                if st_type.needs_input:
+                    if k == 0:
+                        raise InputError(f"{self.case_path}: stage {cfg.name} ({cfg.type}) needs an input state, "
+                                         "but it is the first stage")
+                    if in_path is None or not in_path.exists():
+                        raise InputError(f"stage {cfg.name}: missing stage input {in_path}; run the earlier "
+                                         "stages first (without --from/--only)")
+                    if state_in is None:
+                        state_in = read_state(in_path)
+                    require(state_in, st_type.requires, consumer=f"stage {cfg.name}", source=in_path)
+                    input_hash = state_hash(state_in)
+                else:
+                    input_hash = ""
+                chash = self.config_hash(cfg)
+                forced = force or (from_stage is not None and k >= first) or only_k == k
+                if not forced and out_path.exists():
+                    meta = read_meta(out_path)
+                    if meta.get("config_hash") == chash and meta.get("input_hash") == input_hash:
+                        self.log(f"[{cfg.name}] up to date ({out_path.name}); skipped")
+                        results.append(StageResult(cfg.name, out_path, True, 0.0))
+                        state_in, in_path = None, out_path
+                        continue
+                ctx = StageContext(self, k, cfg, chash, input_hash)
+                if state_in is not None and "spheres" in state_in.groups:
+                    ctx._nparticles = len(state_in.groups["spheres"]["radius"])
+                self.log(f"[{cfg.name}] {cfg.type} stage started")
+                t0 = _time.perf_counter()
+                state = st_type.run(ctx, cfg, state_in)
+                set_rng(state, ctx.rng)
+                self.finish_state(state)
+                write_state(out_path, state)
+                if ctx.checkpoint_path.exists():
+                    ctx.checkpoint_path.unlink()
+                wall = _time.perf_counter() - t0
+                self.log(f"[{cfg.name}] done in {wall:.2f} s"
+                         + (f", {ctx.throughput:.3g} particle-steps/s" if ctx.throughput else "")
+                         + f" -> {out_path.name}")
+                results.append(StageResult(cfg.name, out_path, False, wall, ctx.throughput))
+                state_in, in_path = state, out_path
+                if only_k is not None:
+                    break
+        finally:
+            self._logfile.close()
+            self._logfile = None
+        return results
+
+
+def run_case(case, out=None, from_stage=None, only=None, force=False, overrides=(), threads=None, quiet=False,
+             resume=False):
+    """Run a case file like ``demcli run``; returns a list of :class:`StageResult`.
+
+    Args:
+        case: path of the YAML case.
+        out: run folder (default ``runs/<case name>``).
+        from_stage: re-run from this stage on. only: run just this stage.
+        force: re-run every stage even when up to date.
+        overrides: ``["path=value", ...]`` applied to the case before validation.
+        threads: threads for the parallel kernels (default: all cores).
+        quiet: no progress or log lines on stderr.
+        resume: continue interrupted stages from their checkpoints.
+    """
+    from demcli.jit import set_threads
+
+    runner = Runner(case, overrides=overrides, out=out, quiet=quiet, resume=resume)
+    set_threads(threads)
+    return runner.run(from_stage=from_stage, only=only, force=force)

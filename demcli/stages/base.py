@@ -1,0 +1,49 @@
+"""Stage types: each is a config schema plus a run function, registered by name.
+
+A stage type module calls :func:`register_stage` at import; the case schema is built
+from the registry, so a new stage is one new module and nothing else changes.
+"""
+
+from dataclasses import dataclass, field
+
+STAGE_TYPES = {}
+
+
+@dataclass(frozen=True)
+class StageType:
+    """A kind of stage.
+
+    Attributes:
+        name: the ``type:`` value in a case file.
+        fields: dict of schema fields of the stage (besides ``name`` and ``type``).
+        run: ``run(ctx, cfg, state_in) -> State``.
+        needs_input: the stage reads the previous stage's state.
+        requires: state fields the input must hold (checked before running).
+        plan: optional ``plan(cfg, case) -> Plan`` for ``demcli check``.
+        check: optional cross-field rule ``check(node, report)``.
+        doc: one-line description.
+    """
+
+    name: str
+    fields: dict
+    run: object
+    needs_input: bool = True
+    requires: tuple = ()
+    plan: object = None
+    check: object = None
+    doc: str = ""
+    describe: object = field(default=None)
+
+
+def register_stage(stage_type):
+    if stage_type.name in STAGE_TYPES:
+        raise ValueError(f"stage type {stage_type.name!r} registered twice")
+    STAGE_TYPES[stage_type.name] = stage_type
+    return stage_type
+
+
+def load_stage_types():
+    """Import every built-in stage module (registers them) and return the registry."""
+    from demcli.stages import dem, generate  # noqa: F401
+
+    return STAGE_TYPES

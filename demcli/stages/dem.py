@@ -1,0 +1,475 @@
+"""``dem`` stage: time integration of the scene with the physics the stage declares.
+
+The stage reads the previous state, builds walls and the contact law from its config,
+plans the declared effects, picks the time step (a fraction of the critical step, or
+an explicit one that must stay below it), and runs the compiled step loop in chunks.
+Between chunks it writes records (CSV), snapshots (VTU + PVD), progress, and keeps a
+copy of the last good state. A guard failure stops the stage with a diagnosis and
+writes the last good state; Ctrl-C writes a checkpoint that ``--resume`` continues
+bit-identically.
+"""
+
+import math
+import time as _time
+
+import numpy as np
+
+from demcli.config.schema import Bool, Float, Int, List, Map, Optional, Section, Str, Tagged, Vector
+from demcli.errors import StageError
+from demcli.stages.base import StageType, register_stage
+from demcli.state.fields import Field, register, register_group
+
+register_group("checkpoint", "Engine accumulators of an interrupted dem stage (only in .ckpt.h5 files)",
+               writer="stage dem")
+for _name, _dims, _doc in [("losses0", (4,), "losses carried in from the input state [J]"),
+                           ("esph", ("n_esph", 2), "per-sphere cumulative dashpot and slip losses [J]"),
+                           ("ebody", ("n_ebody",), "per-body cumulative damping losses [J]"),
+                           ("eacc", (1,), "cumulative wall work [J]"),
+                           ("ke_limit", (1,), "kinetic-energy guard limit [J]")]:
+    register(Field(f"checkpoint/{_name}", "f", _dims, "J", _doc, writer="stage dem"))
+
+MOTION = Tagged("mode", {
+    "fixed": Section({}),
+    "velocity": Section({"velocity": Vector(3, "m/s", doc="prescribed wall velocity")}),
+    "servo": Section({
+        "stress": Float("Pa", min=0, doc="target compressive stress on the wall"),
+        "gain": Float(min=0, max=1, min_inclusive=False, default=0.5,
+                      doc="relaxation alpha: the wall closes this share of the stress error per step"),
+        "max_speed": Float("m/s", min=0, min_inclusive=False, default=1.0),
+        "area": Optional(Float("m^2", min=0, min_inclusive=False), doc="loaded area (default: from the box)"),
+    }),
+    "force": Section({
+        "force": Float("N", doc="mean force pushing the wall into the domain"),
+        "amplitude": Float("N", min=0, default=0.0),
+        "frequency": Float("Hz", min=0, default=0.0),
+        "mass": Float("kg", min=0, min_inclusive=False),
+    }),
+}, default={"mode": "fixed"}, doc="how the wall moves along its normal")
+
+FACES = ("x0", "x1", "y0", "y1", "z0", "z1")
+
+WALL = Tagged("type", {
+    "plane": Section({
+        "name": Str(default=None), "point": Vector(3, "m"), "normal": Vector(3, doc="into the domain"),
+        "material": Str(), "motion": MOTION,
+        "extent": Optional(Vector(6, "m"), doc="drawing bounds xmin ymin zmin xmax ymax zmax"),
+    }),
+    "box": Section({
+        "name": Str(default="box"), "min": Vector(3, "m"), "max": Vector(3, "m"), "material": Str(),
+        "open": List(Str(choices=list(FACES)), default=(), doc="faces left out, e.g. [z1]"),
+        "motion": Map(MOTION, default={}, doc="motion per face name (x0 ... z1); others fixed"),
+    }),
+    "cylinder": Section({
+        "name": Str(default=None), "base": Vector(3, "m", doc="point on the axis (bottom)"),
+        "axis": Vector(3, default=(0.0, 0.0, 1.0)), "radius": Float("m", min=0, min_inclusive=False),
+        "height": Float("m", min=0, min_inclusive=False, doc="drawn height"), "material": Str(),
+        "motion": MOTION,
+    }),
+})
+
+CONTACT_PAIR = Section({
+    "materials": List(Str(), min_len=2, max_len=2),
+    "friction": Optional(Float(min=0)),
+    "rolling_friction": Optional(Float(min=0)),
+    "restitution": Optional(Float(min=0, max=1, min_inclusive=False)),
+    "kn": Optional(Float("N/m", min=0, min_inclusive=False)),
+    "kt": Optional(Float("N/m", min=0)),
+    "cn": Optional(Float("N*s/m", min=0)),
+})
+
+FIELDS = {
+    "physics": Section({
+        "gravity": Optional(Vector(3, "m/s^2"), doc="gravity vector; omit for none"),
+        "friction": Bool(default=False, doc="tangential springs with Coulomb slip"),
+        "rolling_resistance": Bool(default=False, doc="rolling resistance from material rolling_friction"),
+        "local_damping": Optional(Float(min=0, max=1, max_inclusive=False), doc="Cundall local damping lambda"),
+        "viscous_damping": Optional(Float("Hz", min=0), doc="mass-proportional damping alpha"),
+        "energy": Bool(default=False, doc="energy book-keeping (losses, wall work, balance)"),
+    }, default={}, doc="the effects this stage simulates; nothing else runs"),
+    "contact": Section({
+        "law": Str(choices=["hertz_mindlin", "linear"], default="hertz_mindlin"),
+        "kn": Optional(Float("N/m", min=0, min_inclusive=False), doc="linear: normal stiffness"),
+        "kt": Optional(Float("N/m", min=0), doc="linear: tangential stiffness (default kn/4)"),
+        "cn": Float("N*s/m", min=0, default=0.0, doc="linear: absolute normal damping (0: from restitution)"),
+        "tangential_damping": Float(min=0, default=0.0, doc="c_t / c_n"),
+        "pairs": List(CONTACT_PAIR, default=(), doc="per material pair overrides"),
+    }, default={}),
+    "walls": List(WALL, default=(), doc="rigid walls"),
+    "time": Section({
+        "duration": Optional(Float("s", min=0, min_inclusive=False)),
+        "steps": Optional(Int(min=1)),
+        "dt": Optional(Float("s", min=0, min_inclusive=False), doc="explicit time step (default: auto)"),
+        "dt_factor": Float(min=0, max=1, min_inclusive=False, default=0.1,
+                           doc="time step as a fraction of the critical step"),
+    }),
+    "stop": Optional(Section({
+        "kinetic_ratio": Float(min=0, min_inclusive=False,
+                               doc="stop when mean kinetic energy per body < ratio * m g d"),
+        "min_time": Float("s", min=0, default=0.0),
+    }), doc="stop early when the bed is at rest"),
+    "output": Section({
+        "records": Int(min=1, default=200, doc="record rows over the run"),
+        "snapshots": Int(min=0, default=10, doc="VTU snapshots over the run (plus the first and last)"),
+    }, default={}),
+    "neighbors": Section({"skin": Float(min=0, min_inclusive=False, default=0.3,
+                                        doc="Verlet skin / mean radius")}, default={}),
+    "safety": Section({
+        "check_every": Int(min=1, default=100),
+        "overlap_limit": Float(min=0, min_inclusive=False, default=0.5, doc="overlap / smaller radius"),
+        "energy_limit": Float(min=1, default=1e3, doc="kinetic energy / reference energy"),
+        "allow_unstable_dt": Bool(default=False, doc="accept dt above the critical step (tests only)"),
+    }, default={}),
+}
+
+
+def _check(node, report):
+    t = node.time
+    if (t.duration is None) == (t.steps is None):
+        report("time", "give exactly one of duration or steps", None)
+    c = node.contact
+    if c.law == "linear" and c.kn is None:
+        report("contact.kn", "the linear law needs kn", None)
+    if c.law != "linear":
+        for key in ("kn", "kt"):
+            if c[key] is not None:
+                report(f"contact.{key}", "only used by law: linear", c[key])
+        if c.cn:
+            report("contact.cn", "only used by law: linear", c.cn)
+    for k, p in enumerate(c.pairs):
+        if p.friction is not None and not node.physics.friction:
+            report(f"contact.pairs.{k}.friction", "physics.friction is off", p.friction)
+        if p.rolling_friction is not None and not node.physics.rolling_resistance:
+            report(f"contact.pairs.{k}.rolling_friction", "physics.rolling_resistance is off", p.rolling_friction)
+    if node.stop is not None and node.physics.gravity is None:
+        report("stop", "the kinetic-energy criterion needs gravity (it scales with m g d)", None)
+
+
+def declared_effects(cfg, dimension):
+    p = cfg.physics
+    eff = []
+    if p.gravity is not None:
+        eff.append("gravity")
+    for key in ("friction", "rolling_resistance", "energy"):
+        if p[key]:
+            eff.append(key)
+    if p.local_damping is not None:
+        eff.append("local_damping")
+    if p.viscous_damping is not None:
+        eff.append("viscous_damping")
+    if dimension == 2:
+        eff.append("planar")
+    return eff
+
+
+def contact_model(cfg):
+    from demcli.engine.materials import ContactModel
+
+    c = cfg.contact
+    pairs = tuple((p.materials[0], p.materials[1],
+                   {k: p[k] for k in ("friction", "rolling_friction", "restitution", "kn", "kt", "cn")
+                    if p[k] is not None}) for p in c.pairs)
+    kn = c.kn or 0.0
+    kt = c.kt if c.kt is not None else kn / 4.0
+    return ContactModel(law=c.law, kn=kn, kt=kt, cn=c.cn, tangential_damping=c.tangential_damping, pairs=pairs)
+
+
+def case_materials(case):
+    from demcli.engine.materials import Material
+
+    return [Material(name, **dict(m.to_dict())) for name, m in case.materials.items()]
+
+
+def build_walls(cfg, case):
+    """Walls of the stage config as arrays (box walls become up to six planes)."""
+    from demcli.engine.system import Walls
+    from demcli.kernels import walls as W
+
+    names = list(case.materials)
+    rows = []
+
+    def add(name, kind, point, normal, radius, material, motion, extent, area):
+        prm = np.zeros(W.N_WPARAMS)
+        control = W.FIXED
+        v = np.zeros(3)
+        mode = motion.mode if motion is not None else "fixed"
+        if mode == "velocity":
+            control, v = W.VELOCITY, np.array(motion.velocity)
+        elif mode == "servo":
+            control = W.SERVO
+            prm[W.W_TARGET] = motion.stress
+            prm[W.W_GAIN] = motion.gain
+            prm[W.W_VMAX] = motion.max_speed
+            prm[W.W_AREA] = motion.area if motion.area is not None else area
+        elif mode == "force":
+            control = W.FORCE
+            prm[W.W_TARGET] = motion.force
+            prm[W.W_AMPLITUDE] = motion.amplitude
+            prm[W.W_FREQ] = motion.frequency
+            prm[W.W_MASS] = motion.mass
+        n = np.asarray(normal, float)
+        rows.append((name, kind, np.asarray(point, float), n / np.linalg.norm(n), radius, names.index(material),
+                     control, prm, v, np.asarray(extent, float)))
+
+    for k, w in enumerate(cfg.walls):
+        if w.type == "plane":
+            ext = w.extent if w.extent is not None else tuple(np.r_[np.array(w.point) - 0.1, np.array(w.point) + 0.1])
+            add(w.name or f"wall{k}", W.PLANE, w.point, w.normal, 0.0, w.material, w.motion, ext, math.nan)
+        elif w.type == "cylinder":
+            b = np.array(w.base)
+            ext = np.r_[b - w.radius, b + w.radius]
+            ext[5] = b[2] + w.height
+            ext[2] = b[2]
+            add(w.name or f"wall{k}", W.CYLINDER, w.base, w.axis, w.radius, w.material, w.motion, ext, math.nan)
+        else:
+            lo, hi = np.array(w.min), np.array(w.max)
+            ext = np.r_[lo, hi]
+            size = hi - lo
+            for f, face in enumerate(FACES):
+                if face in w.open:
+                    continue
+                d = f // 2
+                normal = np.zeros(3)
+                normal[d] = 1.0 if f % 2 == 0 else -1.0
+                point = lo.copy() if f % 2 == 0 else hi.copy()
+                area = float(np.prod(np.delete(size, d)))
+                add(f"{w.name}.{face}", W.PLANE, point, normal, 0.0, w.material, w.motion.get(face), ext, area)
+    walls = Walls()
+    if rows:
+        walls = Walls(name=[r[0] for r in rows], kind=np.array([r[1] for r in rows], np.int8),
+                      point=np.array([r[2] for r in rows]), normal=np.array([r[3] for r in rows]),
+                      radius=np.array([r[4] for r in rows], float), material=np.array([r[5] for r in rows], np.int64),
+                      control=np.array([r[6] for r in rows], np.int8), prm=np.array([r[7] for r in rows]),
+                      v=np.array([r[8] for r in rows]), extent=np.array([r[9] for r in rows]))
+    bad = [walls.name[i] for i in range(len(walls)) if walls.control[i] == W.SERVO and not walls.prm[i, W.W_AREA] > 0]
+    if bad:
+        raise StageError(f"servo walls {bad} need motion.area (only box faces know their area)")
+    return walls
+
+
+def _is_clumped(groups):
+    s = groups["spheres"]
+    return len(s["radius"]) != len(groups["bodies"]["mass"]) or bool(np.any(s["offset"] != 0.0))
+
+
+def make_system(ctx, cfg, groups, time=0.0, step=0):
+    """System, plan and time-step information for this stage."""
+    from demcli.engine.plan import make_plan
+    from demcli.engine.system import Dynamics, System
+
+    walls = build_walls(cfg, ctx.case)
+    plan = make_plan(declared_effects(cfg, ctx.case.dimension), clumps=_is_clumped(groups), walls=len(walls) > 0)
+    p = cfg.physics
+    dyn = Dynamics(gravity=tuple(p.gravity) if p.gravity is not None else (0.0, 0.0, 0.0),
+                   local_damping=p.local_damping or 0.0, viscous_damping=p.viscous_damping or 0.0,
+                   skin=cfg.neighbors.skin, check_every=cfg.safety.check_every,
+                   overlap_limit=cfg.safety.overlap_limit, energy_limit=cfg.safety.energy_limit)
+    system = System(groups, case_materials(ctx.case), contact_model(cfg), plan, walls, dyn, dt=1.0,
+                    time=time, step=step)
+    dt_crit = system.critical_dt()
+    if cfg.time.dt is not None:
+        dt = cfg.time.dt
+        if dt > dt_crit and not cfg.safety.allow_unstable_dt:
+            raise StageError(f"stage {ctx.name}: time.dt = {dt:.4g} s is {dt / dt_crit:.3g} times the critical "
+                             f"step {dt_crit:.4g} s; lower it or use time.dt_factor")
+    else:
+        dt = cfg.time.dt_factor * dt_crit
+    system.dt = dt
+    return system, plan, dt, dt_crit
+
+
+def reference_energy(system):
+    """Energy scale for the runaway guard: what gravity, walls and the start can supply [J]."""
+    g = float(np.linalg.norm(system.gravity)) if system.plan.has("gravity") else 0.0
+    pts = [system.xs]
+    if len(system.walls):
+        pts.append(system.wpoint)
+    allp = np.concatenate(pts)
+    span = float(np.linalg.norm(allp.max(axis=0) - allp.min(axis=0))) + 2 * float(system.rad.max())
+    mtot = float(system.mass.sum())
+    e = system.kinetic_energy() + system.strain_energy() + mtot * g * span
+    if len(system.walls):
+        from demcli.kernels import walls as W
+
+        vmax = max(float(np.abs(system.wv).max()), float(system.walls.prm[:, W.W_VMAX].max()))
+        fmax = float(np.abs(system.walls.prm[:, W.W_TARGET]).max() + system.walls.prm[:, W.W_AMPLITUDE].max())
+        area = np.nan_to_num(system.walls.prm[:, W.W_AREA]).max()
+        e += 0.5 * mtot * vmax ** 2 + (fmax + fmax * area) * span
+    # a floor: the energy of every body moving at 1 % of the speed that spans its size per ms
+    e += 0.5 * mtot * (0.01 * float(system.rad.mean()) / 1e-3) ** 2
+    return e
+
+
+def run(ctx, cfg, state_in):
+    from demcli.kernels import layout as K
+    from demcli.state import RecordTable
+    from demcli.state.vtu import Snapshots
+
+    ckpt = ctx.load_checkpoint()
+    source = ckpt if ckpt is not None else state_in
+    groups = source.groups
+    system, plan, dt, dt_crit = make_system(ctx, cfg, groups, time=float(source.meta.get("time", 0.0)) if ckpt
+                                            else 0.0, step=int(source.meta.get("step", 0)) if ckpt else 0)
+    if ckpt is not None:
+        system.wpoint[:] = groups["walls"]["point"]
+        system.wv[:] = groups["walls"]["v"]
+        c = groups["checkpoint"]
+        system.losses0 = dict(zip(("damping", "friction", "body_damping", "wall_work"), map(float, c["losses0"])))
+        if len(system.esph):
+            system.esph[:] = c["esph"]
+            system.ebody[:] = c["ebody"]
+        system.eacc[:] = c["eacc"]
+        system.ke_limit = float(c["ke_limit"][0])
+        ctx.log(f"resuming from checkpoint at step {system.step} (t = {system.time:.6g} s)")
+    else:
+        system.ke_limit = cfg.safety.energy_limit * reference_energy(system)
+    ctx.log(f"dt = {dt:.4g} s = {dt / dt_crit:.3g} x critical {dt_crit:.4g} s; "
+            f"effects: {', '.join(sorted(plan.effects)) or 'none'}")
+    total = cfg.time.steps if cfg.time.steps is not None else int(math.ceil(cfg.time.duration / dt))
+    rec_every = max(1, total // cfg.output.records)
+    snap_every = max(1, total // cfg.output.snapshots) if cfg.output.snapshots else 0
+    energy = plan.has("energy")
+    cols = {"time": "s", "step": "1", "kinetic": "J", "contacts": "1", "wall_contacts": "1",
+            "coordination": "1"}
+    if energy:
+        cols.update({k: "J" for k in ("strain", "gravity", "damping", "friction", "body_damping", "wall_work",
+                                      "total")})
+    if ckpt is not None:
+        table = RecordTable.from_state(ckpt, "dem")
+        wtable = RecordTable.from_state(ckpt, "walls") if len(system.walls) else None
+    else:
+        table = RecordTable("dem", cols)
+        wtable = None
+        if len(system.walls):
+            wcols = {"time": "s"}
+            for name in system.walls.name:
+                wcols[f"{name}.position"] = "m"
+                wcols[f"{name}.force"] = "N"
+            wtable = RecordTable("walls", wcols)
+    snaps = Snapshots(ctx.snapshot_dir, resume=ckpt is not None)
+    if ckpt is not None:
+        snaps.spheres.truncate(system.time)
+        snaps.walls.truncate(system.time)
+        snaps.count = len(snaps.spheres)
+    nb = len(system.mass)
+    d_mean = 2.0 * float(system.rad.mean())
+    g = float(np.linalg.norm(system.gravity))
+    e_unit = float(system.mass.mean()) * g * d_mean
+
+    def record():
+        ke = system.kinetic_energy()
+        npp, npw = system.contact_count()
+        row = {"time": system.time, "step": system.step, "kinetic": ke, "contacts": npp, "wall_contacts": npw,
+               "coordination": (2.0 * npp + npw) / max(nb, 1)}
+        if energy:
+            row.update(system.energy_record())
+            row["kinetic"] = ke
+        table.append(row)
+        if wtable is not None:
+            wrow = {"time": system.time}
+            for k, name in enumerate(system.walls.name):
+                n = system.walls.normal[k]
+                wrow[f"{name}.position"] = float(system.wpoint[k] @ n)
+                wrow[f"{name}.force"] = float(-system.wforce[k] @ n)
+            wtable.append(wrow)
+        return ke
+
+    def snapshot():
+        snaps.write(ctx.state_from(system, plan, extra=None))
+
+    if ckpt is None:
+        record()
+        if snap_every:
+            snapshot()
+    last_good = system.snapshot()
+    start_step = system.step
+    t0 = _time.perf_counter()
+    progress = ctx.progress(total, start_step)
+    chunk = min(rec_every, 200)
+    stopped = None
+    try:
+        while system.step < total:
+            nxt = min(total, (system.step // rec_every + 1) * rec_every)
+            if snap_every:
+                nxt = min(nxt, (system.step // snap_every + 1) * snap_every)
+            n = min(chunk, nxt - system.step)
+            c0 = _time.perf_counter()
+            status, done = system.advance(n)
+            elapsed = _time.perf_counter() - c0
+            if status != K.OK:
+                ctx.fail(_diagnosis(ctx, system, status, dt, dt_crit, cfg), system, plan, last_good)
+            # chunks of about 0.5 s keep Ctrl-C and progress responsive; physics does not depend on them
+            chunk = max(1, min(rec_every, int(n * 0.5 / max(elapsed, 1e-6))))
+            if system.step % rec_every == 0 or system.step == total:
+                ke = record()
+                last_good = system.snapshot()
+                if cfg.stop is not None and system.time >= cfg.stop.min_time and \
+                        ke / max(nb, 1) < cfg.stop.kinetic_ratio * e_unit:
+                    stopped = f"at rest (kinetic ratio < {cfg.stop.kinetic_ratio:g}) at t = {system.time:.4g} s"
+                    break
+            if snap_every and system.step % snap_every == 0 and system.step < total:
+                snapshot()
+            progress.update(system.step)
+    except KeyboardInterrupt:
+        system.restore(last_good)
+        extra = {"checkpoint": {
+            "losses0": np.array([system.losses0[k] for k in ("damping", "friction", "body_damping", "wall_work")]),
+            "esph": system.esph.copy(), "ebody": system.ebody.copy(), "eacc": system.eacc.copy(),
+            "ke_limit": np.array([system.ke_limit])}}
+        st = ctx.state_from(system, plan, extra=extra)
+        table.to_state(st)  # rows end at the last good step, which was taken right after a record
+        if wtable is not None:
+            wtable.to_state(st)
+        path = ctx.write_checkpoint(st)
+        progress.close()
+        raise StageError(f"stage {ctx.name} interrupted at step {system.step}; continue with --resume",
+                         state_file=path) from None
+    progress.close()
+    wall = _time.perf_counter() - t0
+    steps_run = system.step - start_step
+    nsph = len(system.rad)
+    rate = nsph * steps_run / wall if wall > 0 else 0.0
+    if snap_every:
+        snapshot()
+    ctx.log(f"{steps_run} steps in {wall:.2f} s: {rate:.3g} particle-steps/s"
+            + (f"; stopped {stopped}" if stopped else ""))
+    ctx.throughput = rate
+    st = ctx.state_from(system, plan, extra=None)
+    table.to_state(st)
+    ctx.write_records(table, x="time", ys=["kinetic"], logy=True)
+    if wtable is not None:
+        wtable.to_state(st)
+        ctx.write_records(wtable, x="time", ys=[c for c in wtable.to_arrays() if c.endswith(".force")])
+    if energy:
+        ctx.write_records(table, x="time", ys=["kinetic", "strain", "gravity", "damping", "friction",
+                                                "body_damping", "total"], suffix="energy")
+    return st
+
+
+def _diagnosis(ctx, system, status, dt, dt_crit, cfg):
+    from demcli.kernels import layout as K
+
+    info = system.info
+    where = f"stage {ctx.name} stopped at step {system.step} (t = {system.time:.6g} s): {K.STATUS_TEXT[status]}"
+    if status == K.BAD_NUMBER:
+        where += f" of body {int(system.body_id[int(info[0])])}"
+    elif status == K.BAD_OVERLAP:
+        where += (f": spheres {int(info[0])} and {int(info[1])} overlap {100 * info[2]:.3g} % of the smaller radius "
+                  f"(limit {100 * cfg.safety.overlap_limit:.3g} %)")
+    elif status == K.BAD_ENERGY:
+        where += (f": kinetic energy {info[3]:.4g} J exceeds {cfg.safety.energy_limit:g} x the reference energy "
+                  f"({system.ke_limit:.4g} J)")
+    where += f"; time step {dt:.4g} s is {dt / dt_crit:.3g} of the critical {dt_crit:.4g} s"
+    return where
+
+
+def plan_summary(ctx_case, cfg, scene):
+    """Effects, passes and arrays of the stage for ``demcli check`` (no kernels compiled)."""
+    from demcli.engine.plan import make_plan
+
+    return make_plan(declared_effects(cfg, ctx_case.dimension), clumps=scene.get("clumps", False),
+                     walls=len(cfg.walls) > 0)
+
+
+register_stage(StageType(
+    "dem", FIELDS, run, needs_input=True, requires=("bodies/x", "spheres/radius"), check=_check,
+    plan=plan_summary, doc="integrate the motion with the declared physics"))

@@ -1,0 +1,209 @@
+"""VTU snapshots and PVD series for ParaView (for viewing only, never read back as state).
+
+Spheres become vertex cells at their world centres with point data ``radius``,
+``diameter``, ``velocity``, ``speed``, ``omega``, ``body_id`` and ``material``; in
+ParaView apply *Glyph* (Sphere, scale by ``diameter``, scale factor 1). Walls become a
+quad surface: planes clipped to their ``extent`` box, cylinders as a 48-sided tube
+spanning the extent along the axis, with cell data ``wall``, ``kind``, ``control``,
+``velocity`` and ``force``. Files are binary zlib-compressed VTU written by meshio,
+atomically; the ``.pvd`` collection is rewritten atomically after each snapshot.
+"""
+
+from __future__ import annotations
+
+import os
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import meshio
+import numpy as np
+
+from demcli.state.atomic import atomic_path, atomic_write_text
+
+CYLINDER_SEGMENTS = 48
+
+
+def _write_mesh(path, mesh: meshio.Mesh) -> Path:
+    path = Path(path)
+    with atomic_path(path) as tmp:
+        meshio.write(tmp, mesh, file_format="vtu", binary=True, compression="zlib")
+    return path
+
+
+def sphere_mesh(state) -> meshio.Mesh:
+    """The spheres of a State as a meshio Mesh of vertex cells (see module doc)."""
+    n_s = len(state["spheres/radius"])
+    body = np.asarray(state["spheres/body"], dtype=np.int64)
+    radius = np.asarray(state["spheres/radius"], dtype=np.float64)
+    omega = np.asarray(state["bodies/omega"], dtype=np.float64)[body]
+    velocity = state.sphere_velocities()
+    point_data = {
+        "radius": radius,
+        "diameter": 2.0 * radius,
+        "velocity": velocity,
+        "speed": np.linalg.norm(velocity, axis=1) if n_s else np.zeros(0),
+        "omega": omega,
+        "body_id": np.asarray(state["bodies/id"], dtype=np.int64)[body],
+        "material": np.asarray(state["spheres/material"], dtype=np.int64),
+    }
+    cells = [("vertex", np.arange(n_s, dtype=np.int64).reshape(-1, 1))]
+    return meshio.Mesh(state.sphere_centres(), cells, point_data=point_data)
+
+
+def write_spheres_vtu(path, state) -> Path:
+    """Write the spheres of ``state`` as a binary VTU (atomically); returns the path."""
+    return _write_mesh(path, sphere_mesh(state))
+
+
+def _basis(n):
+    """Two unit vectors u, w with (u, w, n) right-handed; u, w axis-aligned when n is."""
+    n = np.asarray(n, dtype=float)
+    n = n / np.linalg.norm(n)
+    e = np.zeros(3)
+    e[int(np.argmin(np.abs(n)))] = 1.0
+    u = np.cross(n, e)
+    u /= np.linalg.norm(u)
+    return u, np.cross(n, u), n
+
+
+def _box_corners(extent):
+    lo, hi = np.asarray(extent[:3], float), np.asarray(extent[3:], float)
+    return np.array([[(lo, hi)[i][0], (lo, hi)[j][1], (lo, hi)[k][2]]
+                     for i in (0, 1) for j in (0, 1) for k in (0, 1)])
+
+
+def _plane_quad(point, normal, extent):
+    """Corner points (4,3) of the plane's patch covering the extent box, counter-clockwise
+    seen from the side the normal points to."""
+    u, w, _ = _basis(normal)
+    rel = _box_corners(extent) - point
+    a, b = rel @ u, rel @ w
+    p = np.asarray(point, float)
+    return np.array([p + u * a.min() + w * b.min(), p + u * a.max() + w * b.min(),
+                     p + u * a.max() + w * b.max(), p + u * a.min() + w * b.max()])
+
+
+def _cylinder_surface(point, axis, radius, extent, segments=CYLINDER_SEGMENTS):
+    """Points and quads of a cylinder around ``axis`` through ``point``, spanning the extent
+    box's projection on the axis."""
+    u, w, a = _basis(axis)
+    t = (_box_corners(extent) - point) @ a
+    theta = np.linspace(0.0, 2.0 * np.pi, segments, endpoint=False)
+    ring = radius * (np.cos(theta)[:, None] * u + np.sin(theta)[:, None] * w)
+    p = np.asarray(point, float)
+    pts = np.concatenate([p + a * t.min() + ring, p + a * t.max() + ring])
+    j = np.arange(segments)
+    quads = np.stack([j, (j + 1) % segments, (j + 1) % segments + segments, j + segments], axis=1)
+    return pts, quads
+
+
+def wall_mesh(state) -> meshio.Mesh:
+    """The walls of a State as a meshio Mesh of quads (see module doc)."""
+    points, quads, owner = [], [], []
+    n_w = len(state["walls/kind"]) if "walls/kind" in state else 0
+    offset = 0
+    for k in range(n_w):
+        extent = np.asarray(state["walls/extent"][k], dtype=float)
+        point = np.asarray(state["walls/point"][k], dtype=float)
+        normal = np.asarray(state["walls/normal"][k], dtype=float)
+        if not (np.all(np.isfinite(extent)) and np.linalg.norm(normal) > 0):
+            continue
+        if int(state["walls/kind"][k]) == 1:
+            pts, q = _cylinder_surface(point, normal, float(state["walls/radius"][k]), extent)
+        else:
+            pts, q = _plane_quad(point, normal, extent), np.array([[0, 1, 2, 3]])
+        points.append(pts)
+        quads.append(q + offset)
+        owner += [k] * len(q)
+        offset += len(pts)
+    pts = np.concatenate(points) if points else np.zeros((0, 3))
+    cells = np.concatenate(quads).astype(np.int64) if quads else np.zeros((0, 4), dtype=np.int64)
+    owner = np.asarray(owner, dtype=np.int64)
+
+    def per_cell(name, width=None, dtype=np.float64):
+        if n_w == 0:
+            return np.zeros((0, width) if width else 0, dtype=dtype)
+        return np.asarray(state[f"walls/{name}"], dtype=dtype)[owner]
+
+    cell_data = {
+        "wall": [owner],
+        "kind": [per_cell("kind", dtype=np.int64)],
+        "control": [per_cell("control", dtype=np.int64)],
+        "velocity": [per_cell("v", 3)],
+        "force": [per_cell("force", 3)],
+    }
+    return meshio.Mesh(pts, [("quad", cells)], cell_data=cell_data)
+
+
+def write_walls_vtu(path, state) -> Path:
+    """Write the walls of ``state`` as a binary VTU surface (atomically); returns the path."""
+    return _write_mesh(path, wall_mesh(state))
+
+
+class PvdSeries:
+    """A ParaView ``.pvd`` collection, rewritten atomically on every :meth:`add`.
+
+    File names are stored relative to the .pvd's folder, so a run folder can be moved.
+    ``resume=True`` keeps the entries of an existing file (a resumed stage).
+    """
+
+    def __init__(self, path, *, resume: bool = False):
+        self.path = Path(path)
+        self.entries: list[tuple[float, int, str]] = []  # (time, part, relative file)
+        if resume and self.path.exists():
+            root = ET.parse(self.path).getroot()
+            for ds in root.iter("DataSet"):
+                self.entries.append((float(ds.get("timestep", 0)), int(ds.get("part", 0)), ds.get("file")))
+
+    def __len__(self) -> int:
+        return len(self.entries)
+
+    def add(self, time: float, file, part: int = 0) -> None:
+        """Append a snapshot file at ``time`` and rewrite the .pvd."""
+        rel = os.path.relpath(Path(file).resolve(), self.path.parent.resolve())
+        self.entries.append((float(time), int(part), Path(rel).as_posix()))
+        self.write()
+
+    def truncate(self, after_time: float) -> None:
+        """Drop entries later than ``after_time`` (resuming from an earlier checkpoint)."""
+        self.entries = [e for e in self.entries if e[0] <= after_time]
+        self.write()
+
+    def to_xml(self) -> str:
+        root = ET.Element("VTKFile", type="Collection", version="0.1", byte_order="LittleEndian")
+        coll = ET.SubElement(root, "Collection")
+        for time, part, rel in self.entries:
+            ET.SubElement(coll, "DataSet", timestep=repr(time), group="", part=str(part), file=rel)
+        ET.indent(root)
+        return '<?xml version="1.0"?>\n' + ET.tostring(root, encoding="unicode") + "\n"
+
+    def write(self) -> Path:
+        atomic_write_text(self.path, self.to_xml())
+        return self.path
+
+
+class Snapshots:
+    """Numbered sphere and wall snapshots in one folder with ``spheres.pvd``/``walls.pvd``.
+
+    ``Snapshots(run_dir / "compaction").write(state)`` writes ``spheres_000000.vtu``
+    (and ``walls_000000.vtu`` when the state has walls) at ``state.meta['time']``.
+    """
+
+    def __init__(self, folder, *, resume: bool = False):
+        self.folder = Path(folder)
+        self.spheres = PvdSeries(self.folder / "spheres.pvd", resume=resume)
+        self.walls = PvdSeries(self.folder / "walls.pvd", resume=resume)
+        self.count = len(self.spheres)
+
+    def write(self, state) -> list[Path]:
+        time = float(state.meta.get("time", 0.0))
+        out = [write_spheres_vtu(self.folder / f"spheres_{self.count:06d}.vtu", state)]
+        self.spheres.add(time, out[-1])
+        if "walls/kind" in state and len(state["walls/kind"]):
+            out.append(write_walls_vtu(self.folder / f"walls_{self.count:06d}.vtu", state))
+            self.walls.add(time, out[-1])
+        self.count += 1
+        return out
+
+
+__all__ = ["PvdSeries", "Snapshots", "sphere_mesh", "wall_mesh", "write_spheres_vtu", "write_walls_vtu"]
