@@ -136,6 +136,7 @@ class System:
         self.skin = self.dyn.skin * float(self.rad.mean()) if ns else 0.0
         self.max_cells = max(64, 8 * ns)
         self._fresh_lists = True
+        self.prime = True  # evaluate F(x_0) before the first step; False when resuming from stored loads
         self.gravity = np.asarray(dynamics.gravity, np.float64)
         self.ke_limit = math.inf
 
@@ -204,8 +205,9 @@ class System:
             self.nl, self.skin, self.max_cells,
             self.esph, self.ebody, self.eacc,
             int(self.dyn.check_every), float(self.dyn.overlap_limit), float(self.ke_limit),
-            self.counters, self.info, self._fresh_lists)
+            self.counters, self.info, self._fresh_lists, self.step, self.prime)
         self._fresh_lists = False
+        self.prime = False
         self.step += int(done)
         return int(status), int(done)
 

@@ -21,10 +21,10 @@ def hull2d(pts):
 
     pts: (n, 2) float64. Returns the int64 indices of the hull vertices in
     counter-clockwise order, starting from the lexicographically smallest point.
-    Duplicate and collinear points are dropped, and so are points within about
-    1e-12 of the extent from the hull of the others (round-off twins, such as the
-    front and back corners of a box seen along an axis): every hull turn is then
-    strictly convex, as the rotating calipers need. Fewer than 3 distinct points
+    Duplicate, collinear and nearly collinear points are dropped (a turn counts
+    only if its cross product exceeds 1e-12 extent^2), which removes round-off twins
+    such as the front and back corners of a box seen along an axis: every hull turn
+    is then strictly convex, as the rotating calipers need. Fewer than 3 distinct points
     give the points found (length 1 or 2).
     """
     n = pts.shape[0]
@@ -156,14 +156,9 @@ def _advance(pts, j, x, y):
     return j
 
 
-@njit
-def project_rectangle(vertices, ux, uy, uz):
-    """Minimum-area bounding rectangle of the shadow of points along unit direction u.
-
-    vertices: (n, 3) float64 (m). The shadow lives in the plane normal to u with the
-    basis (e1, e2), e1 x e2 = u. Returns (length, width) in m.
-    """
-    # e1: the coordinate axis least aligned with u, made normal to u
+@njit(inline="always")
+def _basis(ux, uy, uz):
+    """Orthonormal e1, e2 normal to unit u with e1 x e2 = u (e1 from the axis least along u)."""
     ax = abs(ux)
     ay = abs(uy)
     az = abs(uz)
@@ -177,9 +172,17 @@ def project_rectangle(vertices, ux, uy, uz):
     e1x *= inv
     e1y *= inv
     e1z *= inv
-    e2x = uy * e1z - uz * e1y
-    e2y = uz * e1x - ux * e1z
-    e2z = ux * e1y - uy * e1x
+    return e1x, e1y, e1z, uy * e1z - uz * e1y, uz * e1x - ux * e1z, ux * e1y - uy * e1x
+
+
+@njit
+def project_rectangle(vertices, ux, uy, uz):
+    """Minimum-area bounding rectangle of the shadow of points along unit direction u.
+
+    vertices: (n, 3) float64 (m). The shadow lives in the plane normal to u with the
+    basis (e1, e2), e1 x e2 = u. Returns (length, width) in m.
+    """
+    e1x, e1y, e1z, e2x, e2y, e2z = _basis(ux, uy, uz)
     n = vertices.shape[0]
     pts = np.empty((n, 2))
     for j in range(n):
@@ -215,41 +218,42 @@ def pair_directions(circles):
     return out[:k]
 
 
-@njit
-def shadow_areas(area_normals, dirs):
-    """Projected (shadow) area A(u) = 1/2 sum_f |a_f n_f . u| for each unit direction.
+@njit(inline="always")
+def _area(circles, weights, ux, uy, uz):
+    s = 0.0
+    for c in range(circles.shape[0]):
+        s += weights[c] * abs(circles[c, 0] * ux + circles[c, 1] * uy + circles[c, 2] * uz)
+    return 0.5 * s
 
-    area_normals: (f, 3) float64, face normal times face area (m^2); dirs: (k, 3)
-    unit. Returns (k,) areas in m^2 (Cauchy's projection formula for a closed convex
-    surface: every shadow point is covered twice).
+
+@njit
+def shadow_areas(circles, weights, dirs):
+    """Projected (shadow) area A(u) = 1/2 sum_c w_c |n_c . u| for each unit direction.
+
+    circles: (g, 3) float64 unit face normals, one per plane direction; weights: (g,)
+    the summed area (m^2) of the faces normal to each; dirs: (k, 3) unit. Returns (k,)
+    areas in m^2 (Cauchy's projection formula: a closed convex surface covers every
+    shadow point twice).
     """
-    nf = area_normals.shape[0]
-    nk = dirs.shape[0]
-    out = np.empty(nk)
-    for k in range(nk):
-        ux = dirs[k, 0]
-        uy = dirs[k, 1]
-        uz = dirs[k, 2]
-        s = 0.0
-        for f in range(nf):
-            s += abs(area_normals[f, 0] * ux + area_normals[f, 1] * uy + area_normals[f, 2] * uz)
-        out[k] = 0.5 * s
+    out = np.empty(dirs.shape[0])
+    for k in range(dirs.shape[0]):
+        out[k] = _area(circles, weights, dirs[k, 0], dirs[k, 1], dirs[k, 2])
     return out
 
 
 @njit
-def best_projection(area_normals, dirs, vertices, rel_tol):
-    """Minimal-shadow direction among candidates, and the sieve rectangle there.
+def best_of_directions(circles, weights, dirs, vertices, rel_tol):
+    """Minimal-shadow direction among given candidates, and the sieve rectangle there.
 
-    area_normals: (f, 3) (m^2); dirs: (k, 3) unit candidates; vertices: (n, 3) (m);
-    rel_tol: candidates whose area is within min * (1 + rel_tol) count as tied and
-    the tie goes to the smallest square aperture of the shadow's minimum-area
-    rectangle (a cube has three minimal directions, all equivalent).
-    Returns (index of the chosen candidate, area m^2, length m, width m, aperture m).
+    circles, weights: as in :func:`shadow_areas`; dirs: (k, 3) unit candidates;
+    vertices: (n, 3) (m); rel_tol: candidates whose area is within min * (1 + rel_tol)
+    count as tied and the tie goes to the smallest square aperture of the shadow's
+    minimum-area rectangle (a cube has three minimal directions, all equivalent).
+    Returns (ux, uy, uz, area m^2, length m, width m, aperture m).
     """
-    areas = shadow_areas(area_normals, dirs)
+    areas = shadow_areas(circles, weights, dirs)
     amin = areas.min()
-    best = -1
+    best = 0
     best_l = 0.0
     best_w = 0.0
     best_ap = np.inf
@@ -262,4 +266,88 @@ def best_projection(area_normals, dirs, vertices, rel_tol):
                 best_l = length
                 best_w = width
                 best_ap = ap
-    return best, areas[best], best_l, best_w, best_ap
+    return dirs[best, 0], dirs[best, 1], dirs[best, 2], areas[best], best_l, best_w, best_ap
+
+
+@njit
+def best_by_sweep(circles, weights, vertices, rel_tol):
+    """Exact minimal shadow over all face-pair directions by sweeping each great circle.
+
+    Same candidates and result as ``best_of_directions(..., pair_directions(circles),
+    ...)`` in O(g^2 log g) instead of O(g^3): along circle a, u(phi) = cos phi e1 +
+    sin phi e2 (phi in (0, pi], u and -u cast the same shadow) and
+    A = alpha cos phi + beta sin phi between crossings with the other circles, where
+    one sign |n_b . u| flips (the sweep of McKenna & Seidel 1985). Crossings are
+    visited in angular order and alpha, beta updated in O(1) each; the area at a
+    crossing does not depend on the sign of the vanishing term. Two passes: the
+    least area on each circle, then the rectangles of the tied directions, sweeping
+    again only the circles that hold one. Returns as best_of_directions.
+    """
+    g = circles.shape[0]
+    circle_min = np.full(g, np.inf)
+    amin = np.inf
+    best_ap = np.inf
+    best = np.zeros(7)
+    key = np.empty(g)
+    xs = np.empty(g)
+    ys = np.empty(g)
+    ps = np.empty(g)
+    qs = np.empty(g)
+    sg = np.empty(g)
+    for stage in range(2):
+        for a in range(g):
+            if stage == 1 and circle_min[a] > amin * (1.0 + rel_tol):
+                continue
+            e1x, e1y, e1z, e2x, e2y, e2z = _basis(circles[a, 0], circles[a, 1], circles[a, 2])
+            alpha = 0.0
+            beta = 0.0
+            for b in range(g):
+                p = circles[b, 0] * e1x + circles[b, 1] * e1y + circles[b, 2] * e1z
+                q = circles[b, 0] * e2x + circles[b, 1] * e2y + circles[b, 2] * e2z
+                r = math.sqrt(p * p + q * q)
+                if b == a or r <= 1e-12:
+                    key[b] = np.inf  # no crossing: sorted last, never visited
+                    continue
+                # the crossing n_b . u = 0 at (x, y) = (-q, p)/r, taken with y > 0 or at (-1, 0)
+                x = -q / r
+                y = p / r
+                if y < 0.0 or (y == 0.0 and x > 0.0):
+                    x = -x
+                    y = -y
+                key[b] = -x  # phi ascending is x = cos phi descending
+                xs[b] = x
+                ys[b] = y
+                ps[b] = p
+                qs[b] = q
+                # the sign of n_b . u just after phi = 0
+                sg[b] = 1.0 if (p > 0.0 or (p == 0.0 and q > 0.0)) else -1.0
+                alpha += 0.5 * weights[b] * sg[b] * p
+                beta += 0.5 * weights[b] * sg[b] * q
+            order = np.argsort(key)
+            for t in range(g):
+                b = order[t]
+                if key[b] == np.inf:
+                    break
+                area = alpha * xs[b] + beta * ys[b]
+                if stage == 0:
+                    circle_min[a] = min(circle_min[a], area)
+                elif area <= amin * (1.0 + rel_tol):
+                    ux = xs[b] * e1x + ys[b] * e2x
+                    uy = xs[b] * e1y + ys[b] * e2y
+                    uz = xs[b] * e1z + ys[b] * e2z
+                    length, width = project_rectangle(vertices, ux, uy, uz)
+                    ap = square_aperture(length, width)
+                    if ap < best_ap:
+                        best_ap = ap
+                        best[0] = ux
+                        best[1] = uy
+                        best[2] = uz
+                        best[3] = area
+                        best[4] = length
+                        best[5] = width
+                        best[6] = ap
+                alpha -= weights[b] * sg[b] * ps[b]
+                beta -= weights[b] * sg[b] * qs[b]
+                sg[b] = -sg[b]
+        amin = circle_min.min()
+    return best[0], best[1], best[2], best[3], best[4], best[5], best[6]

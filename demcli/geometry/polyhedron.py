@@ -40,9 +40,10 @@ class ConvexPolyhedron:
     - ``principal_moments`` (3,), m^5, ascending; ``principal_axes`` (3, 3): columns
       are the matching unit axes, a proper rotation (det +1) from the principal
       frame to the world frame.
-    - ``area_normals`` (f, 3), m^2: normals times areas; ``circles`` (g, 3): the face
-      normals with parallel and antiparallel duplicates removed (the great circles
-      n . u = 0 bounding the cells of the minimal-shadow search).
+    - ``circles`` (g, 3): the face normals with parallel and antiparallel duplicates
+      removed (the great circles n . u = 0 bounding the cells of the minimal-shadow
+      search); ``circle_weights`` (g,), m^2: the summed area of the faces normal to
+      each, so that the shadow area is 1/2 sum_c w_c |n_c . u|.
     """
 
     vertices: np.ndarray
@@ -57,8 +58,8 @@ class ConvexPolyhedron:
     inertia: np.ndarray
     principal_moments: np.ndarray
     principal_axes: np.ndarray
-    area_normals: np.ndarray
     circles: np.ndarray
+    circle_weights: np.ndarray
 
     @property
     def faces(self):
@@ -130,16 +131,16 @@ def _merged_faces(pts, hull, scale):
     graph = coo_matrix((np.ones(same.sum()), (t[same], u[same])), shape=(nt, nt))
     n_comp, label = connected_components(graph, directed=False)
     sizes = np.bincount(label, minlength=n_comp)
-    faces = []
-    for comp in range(n_comp):
+    # lone triangles: orient counter-clockwise about the outward normal
+    lone = sizes[label] == 1
+    t3 = tri[lone].astype(np.int64)
+    a, b, c = pts[t3[:, 0]], pts[t3[:, 1]], pts[t3[:, 2]]
+    flip = np.einsum("ij,ij->i", np.cross(b - a, c - a), eq[lone, :3]) < 0.0
+    t3[flip] = t3[flip][:, [0, 2, 1]]
+    faces = list(t3)
+    for comp in np.flatnonzero(sizes > 1):  # merged coplanar triangles: hull in the plane
         members = np.flatnonzero(label == comp)
         n = eq[members[0], :3]
-        if sizes[comp] == 1:
-            a, b, c = tri[members[0]]
-            if np.dot(np.cross(pts[b] - pts[a], pts[c] - pts[a]), n) < 0.0:
-                b, c = c, b
-            faces.append(np.array([a, b, c], dtype=np.int64))
-            continue
         ids = np.unique(tri[members])
         e1 = np.cross(n, [1.0, 0.0, 0.0] if abs(n[0]) < 0.9 else [0.0, 1.0, 0.0])
         e1 /= np.linalg.norm(e1)
@@ -149,14 +150,22 @@ def _merged_faces(pts, hull, scale):
     return faces
 
 
-def _build(vertices, faces):
-    """ConvexPolyhedron from vertices and counter-clockwise face index lists."""
+def _csr(faces):
+    """Face lists as (flat indices, offsets, the next vertex along each face, face of each)."""
     offsets = np.zeros(len(faces) + 1, dtype=np.int64)
     offsets[1:] = np.cumsum([len(f) for f in faces])
     flat = np.concatenate(faces).astype(np.int64)
-    # Newell's area vector 1/2 sum p_i x p_i+1 gives each face's area and normal
-    nxt = np.concatenate([np.roll(f, -1) for f in faces])
     face_of = np.repeat(np.arange(len(faces)), np.diff(offsets))
+    pos = np.arange(len(flat)) + 1
+    last = pos == offsets[face_of + 1]
+    pos[last] = offsets[face_of[last]]  # wrap to the face's first vertex
+    return flat, offsets, flat[pos], face_of
+
+
+def _build(vertices, faces):
+    """ConvexPolyhedron from vertices and counter-clockwise face index lists."""
+    flat, offsets, nxt, face_of = _csr(faces)
+    # Newell's area vector 1/2 sum p_i x p_i+1 gives each face's area and normal
     ref = vertices.mean(axis=0)
     area_vec = np.zeros((len(faces), 3))
     np.add.at(area_vec, face_of, 0.5 * np.cross(vertices[flat] - ref, vertices[nxt] - ref))
@@ -166,18 +175,19 @@ def _build(vertices, faces):
     np.add.at(plane, face_of, np.einsum("ij,ij->i", vertices[flat], normals[face_of]))
     plane /= np.diff(offsets)
     edges = np.unique(np.sort(np.stack([flat, nxt], axis=1), axis=1), axis=0)
-    volume, centroid, inertia = mass_properties(vertices, faces)
+    volume, centroid, inertia = _mass(vertices, flat, offsets, nxt, face_of)
     moments, axes = np.linalg.eigh(inertia)
     if np.linalg.det(axes) < 0.0:
         axes[:, 2] *= -1.0
-    dots = np.abs(normals @ normals.T)
-    duplicate = np.tril(dots >= 1.0 - _COPLANAR_COS, -1).any(axis=1)
+    parallel = np.abs(normals @ normals.T) >= 1.0 - _COPLANAR_COS
+    keep = ~np.tril(parallel, -1).any(axis=1)
+    circle_of = np.argmax(parallel[:, keep], axis=1)  # first kept circle parallel to each face
     return ConvexPolyhedron(
         vertices=np.ascontiguousarray(vertices), face_indices=flat, face_offsets=offsets,
         normals=normals, offsets=plane, areas=areas, edges=edges, volume=volume,
         centroid=centroid, inertia=inertia, principal_moments=moments, principal_axes=axes,
-        area_normals=np.ascontiguousarray(area_vec),
-        circles=np.ascontiguousarray(normals[~duplicate]))
+        circles=np.ascontiguousarray(normals[keep]),
+        circle_weights=np.bincount(circle_of, weights=areas, minlength=keep.sum()))
 
 
 def mass_properties(vertices, faces):
@@ -193,17 +203,25 @@ def mass_properties(vertices, faces):
     J. Math. Stat. 1(1)). The inertia tensor is I = tr(C) Id - C for the centroidal
     covariance C.
     """
-    tris = np.array([(f[0], f[i], f[i + 1]) for f in faces for i in range(1, len(f) - 1)])
+    vertices = np.asarray(vertices, dtype=np.float64)
+    return _mass(vertices, *_csr(faces))
+
+
+def _mass(vertices, flat, offsets, nxt, face_of):
+    """mass_properties on faces in the layout of :func:`_csr`."""
+    first = flat[offsets[face_of]]
+    fan = (flat != first) & (nxt != first)  # edges (v_i, v_i+1) away from each face's first vertex
+    tris = np.stack([first[fan], flat[fan], nxt[fan]], axis=1)
     ref = vertices.mean(axis=0)
     a, b, c = (vertices[tris[:, k]] - ref for k in range(3))
     vol = np.einsum("ij,ij->i", np.cross(a, b), c) / 6.0
     volume = vol.sum()
     s = a + b + c
-    first = (vol[:, None] * s).sum(axis=0) / 4.0
+    moment1 = (vol[:, None] * s).sum(axis=0) / 4.0
     cov = np.einsum("t,tij->ij", vol / 20.0,
                     np.einsum("ti,tj->tij", a, a) + np.einsum("ti,tj->tij", b, b)
                     + np.einsum("ti,tj->tij", c, c) + np.einsum("ti,tj->tij", s, s))
-    d = first / volume
+    d = moment1 / volume
     cov_c = cov - volume * np.outer(d, d)
     inertia = np.trace(cov_c) * np.eye(3) - cov_c
     return float(volume), ref + d, inertia

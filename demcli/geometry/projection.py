@@ -24,19 +24,11 @@ from demcli.geometry.polyhedron import as_polyhedron
 # candidates whose shadow area is within this relative margin of the minimum count
 # as tied; the tie goes to the smallest aperture (a cube's three face-on shadows)
 _TIE = 1e-9
+# above this many distinct face planes the exact search sweeps the great circles
+# (O(g^2 log g)) instead of evaluating every pair direction (O(g^3))
+_SWEEP_ABOVE = 128
 
 METHODS = ("projection", "volume_sphere", "volume_cube", "inertia_square")
-
-
-def _candidates(poly, method):
-    from demcli.geometry import _kernels
-
-    if method == "exact":
-        return _kernels.pair_directions(poly.circles)
-    if method == "edges":
-        d = poly.vertices[poly.edges[:, 1]] - poly.vertices[poly.edges[:, 0]]
-        return np.ascontiguousarray(d / np.linalg.norm(d, axis=1)[:, None])
-    raise ValueError(f"method must be 'exact' or 'edges', got {method!r}")
 
 
 def projected_area(particle, directions):
@@ -52,11 +44,11 @@ def projected_area(particle, directions):
     single = d.ndim == 1
     d = np.atleast_2d(d)
     d = np.ascontiguousarray(d / np.linalg.norm(d, axis=1)[:, None])
-    out = _kernels.shadow_areas(poly.area_normals, d)
+    out = _kernels.shadow_areas(poly.circles, poly.circle_weights, d)
     return float(out[0]) if single else out
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class ProjectionSieve:
     """Sieve size of a convex polyhedron by the minimal-projection method.
 
@@ -76,10 +68,21 @@ class ProjectionSieve:
 def _best(poly, method):
     from demcli.geometry import _kernels
 
-    dirs = _candidates(poly, method)
-    k, area, length, width, size = _kernels.best_projection(poly.area_normals, dirs,
-                                                            poly.vertices, _TIE)
-    return ProjectionSieve(size=size, length=length, width=width, area=area, direction=dirs[k])
+    if method == "exact" and len(poly.circles) > _SWEEP_ABOVE:
+        res = _kernels.best_by_sweep(poly.circles, poly.circle_weights, poly.vertices, _TIE)
+    else:
+        if method == "exact":
+            dirs = _kernels.pair_directions(poly.circles)
+        elif method == "edges":
+            d = poly.vertices[poly.edges[:, 1]] - poly.vertices[poly.edges[:, 0]]
+            dirs = np.ascontiguousarray(d / np.linalg.norm(d, axis=1)[:, None])
+        else:
+            raise ValueError(f"method must be 'exact' or 'edges', got {method!r}")
+        res = _kernels.best_of_directions(poly.circles, poly.circle_weights, dirs,
+                                          poly.vertices, _TIE)
+    ux, uy, uz, area, length, width, size = res
+    return ProjectionSieve(size=size, length=length, width=width, area=area,
+                           direction=np.array([ux, uy, uz]))
 
 
 def min_projection(particle, method="exact"):

@@ -27,28 +27,54 @@ def _grid(xs, rad, skin, max_cells):
     lo = np.empty(3)
     hi = np.empty(3)
     for d in range(3):
-        lo[d] = xs[0, d]
-        hi[d] = xs[0, d]
+        lo[d] = math.inf
+        hi[d] = -math.inf
     rmax = 0.0
     for i in range(n):
         for d in range(3):
-            if xs[i, d] < lo[d]:
-                lo[d] = xs[i, d]
-            if xs[i, d] > hi[d]:
-                hi[d] = xs[i, d]
+            v = xs[i, d]
+            if math.isfinite(v):  # non-finite points are binned at an edge; the guards report them
+                if v < lo[d]:
+                    lo[d] = v
+                if v > hi[d]:
+                    hi[d] = v
         if rad[i] > rmax:
             rmax = rad[i]
+    for d in range(3):
+        if lo[d] > hi[d]:
+            lo[d] = 0.0
+            hi[d] = 0.0
     h = 2.0 * rmax + skin
     nc = np.empty(3, np.int64)
-    while True:
-        tot = 1
+    while True:  # counts in floating point: far-flung or non-finite points cannot overflow them
+        tot = 1.0
         for d in range(3):
-            nc[d] = max(1, int(math.floor((hi[d] - lo[d]) / h)) + 1)
-            tot *= nc[d]
+            span = (hi[d] - lo[d]) / h
+            tot *= (math.floor(span) + 1.0) if span < 1e18 else 1e18
         if tot <= max_cells:
             break
         h *= 1.26
+    for d in range(3):
+        nc[d] = int(math.floor((hi[d] - lo[d]) / h)) + 1
     return lo, 1.0 / h, nc
+
+
+@njit(inline="always")
+def _coord(x, lo, inv_h, n):
+    """Cell coordinate, clamped to the grid; NaN and far-away points land in an edge cell
+    (memory-safe; the guards report them)."""
+    t = (x - lo) * inv_h
+    if not t > 0.0:
+        return 0
+    if t >= n - 1:
+        return n - 1
+    return int(t)
+
+
+@njit(inline="always")
+def _cell(x, y, z, lo, inv_h, nc):
+    return _coord(x, lo[0], inv_h, nc[0]) + nc[0] * (_coord(y, lo[1], inv_h, nc[1])
+                                                   + nc[1] * _coord(z, lo[2], inv_h, nc[2]))
 
 
 @njit
@@ -59,10 +85,7 @@ def _bin(xs, lo, inv_h, nc):
     cell_of = np.empty(n, np.int64)
     cnt = np.zeros(ncell + 1, np.int64)
     for i in range(n):
-        cx = min(nc[0] - 1, int((xs[i, 0] - lo[0]) * inv_h))
-        cy = min(nc[1] - 1, int((xs[i, 1] - lo[1]) * inv_h))
-        cz = min(nc[2] - 1, int((xs[i, 2] - lo[2]) * inv_h))
-        c = cx + nc[0] * (cy + nc[1] * cz)
+        c = _cell(xs[i, 0], xs[i, 1], xs[i, 2], lo, inv_h, nc)
         cell_of[i] = c
         cnt[c + 1] += 1
     for c in range(ncell):
@@ -86,9 +109,9 @@ def _scan_pairs(xs, rad, body, skin, lo, inv_h, nc, cell_start, items, start, pj
         zi = xs[i, 2]
         ri = rad[i] + skin
         bi = body[i]
-        cx = min(nc[0] - 1, int((xi - lo[0]) * inv_h))
-        cy = min(nc[1] - 1, int((yi - lo[1]) * inv_h))
-        cz = min(nc[2] - 1, int((zi - lo[2]) * inv_h))
+        cx = _coord(xi, lo[0], inv_h, nc[0])
+        cy = _coord(yi, lo[1], inv_h, nc[1])
+        cz = _coord(zi, lo[2], inv_h, nc[2])
         k = start[i] if fill else 0
         for zz in range(max(cz - 1, 0), min(cz + 2, nc[2])):
             for yy in range(max(cy - 1, 0), min(cy + 2, nc[1])):

@@ -534,7 +534,7 @@ def run_steps(nsteps, time, dt, law, flags, prm, gravity, local, visc,
               wkind, wpoint, wnormal, wradius, wv, wmat, wctrl, wprm, wforce, wkn,
               nl, skin, max_cells,
               esph, ebody, eacc,
-              check_every, overlap_limit, ke_limit, counters, info, force_rebuild):
+              check_every, overlap_limit, ke_limit, counters, info, force_rebuild, step0, prime):
     """Advance ``nsteps`` steps; returns (status, steps_done, time, nl).
 
     Args:
@@ -548,6 +548,11 @@ def run_steps(nsteps, time, dt, law, flags, prm, gravity, local, visc,
         counters: (N_COUNTERS,) int64 pass counters, incremented per executed pass.
         info: (4,) float64 diagnosis of a failed guard (indices, worst overlap, kinetic energy).
         force_rebuild: build the lists before the first step (fresh or resumed system).
+        step0: global step count at entry; guards run at global multiples of check_every,
+            and after global step 1.
+        prime: before the first step, evaluate the loads at the current state with a step of
+            zero length (no motion, no history or energy increments), so the first half kick
+            uses F(x_0) (a fresh stage; a resumed one keeps its stored loads).
     """
     x, v, w, q, L, f, tq = bodies
     xs, vs, ws, fs, ts = spheres
@@ -565,14 +570,18 @@ def run_steps(nsteps, time, dt, law, flags, prm, gravity, local, visc,
     ns = xs.shape[0]
     status = OK
     n = 0
-    while n < nsteps:
-        _kick_drift(x, v, w, q, L, f, tq, mass, inert, bflags, dt, rotate_bodies, clumps,
-                    flags[F_PLANAR], xref, lim2, rebuild)
-        counters[C_KICK] += 1
+    while n < nsteps or prime:
+        h = 0.0 if prime else dt
+        if prime:
+            rebuild[0] = 1
+        else:
+            _kick_drift(x, v, w, q, L, f, tq, mass, inert, bflags, dt, rotate_bodies, clumps,
+                        flags[F_PLANAR], xref, lim2, rebuild)
+            counters[C_KICK] += 1
         if clumps:
             _place_members(x, v, w, q, xs, vs, ws, sbody, soff, xref, lim2, rebuild)
             counters[C_MEMBERS] += 1
-        if nw > 0:
+        if nw > 0 and not prime:
             for k in range(nw):
                 for d in range(3):
                     wpoint[k, d] += wv[k, d] * dt
@@ -607,7 +616,7 @@ def run_steps(nsteps, time, dt, law, flags, prm, gravity, local, visc,
                 wref[:, :] = 0.0
             xref = xs.copy()
             counters[C_REBUILD] += 1
-        _pair_forces(pi, pj, xs, vs, ws, rad, smat, smass, prm, law, dt, ft, mr, friction, rolling,
+        _pair_forces(pi, pj, xs, vs, ws, rad, smat, smass, prm, law, h, ft, mr, friction, rolling,
                      energy, fc, ti, tj, act, epair)
         counters[C_PAIRS] += 1
         if friction:
@@ -621,21 +630,25 @@ def run_steps(nsteps, time, dt, law, flags, prm, gravity, local, visc,
         if flags[F_LOCAL] or flags[F_VISCOUS]:
             counters[C_DAMPING] += 1
         _gather(start, rstart, rlist, fc, ti, tj, act, epair, wstart, wwall, wfc,
-                xs, vs, ws, rad, smat, smass, wkind, wpoint, wnormal, wradius, wv, wmat, prm, law, dt,
+                xs, vs, ws, rad, smat, smass, wkind, wpoint, wnormal, wradius, wv, wmat, prm, law, h,
                 wft, wmr, flags, fs, ts, esph,
                 not clumps, v, w, mass, inert, bflags, ebody, gravity, local, visc)
         counters[C_GATHER] += 1
         if clumps:
             _clump_loads(mstart, mlist, xs, fs, ts, x, v, w, q, L, f, tq, mass, inert, bflags, flags,
-                         gravity, local, visc, dt, ebody)
+                         gravity, local, visc, h, ebody)
             counters[C_BODY] += 1
+        if prime:
+            prime = False
+            continue
         n += 1
         time += dt
         if nw > 0:
             _wall_control(time, dt, wstart[ns], wwall, wfc, wnormal, wv, wctrl, wprm, wforce, wkn,
                           eacc, energy)
             counters[C_WALLCTRL] += 1
-        if check_every > 0 and n % check_every == 0:
+        gstep = step0 + n
+        if check_every > 0 and (gstep % check_every == 0 or gstep == 1):
             status = _check(x, v, w, L, mass, inert, clumps, pi, pj, act, xs, rad, overlap_limit, ke_limit, info)
             counters[C_CHECK] += 1
             if status != OK:

@@ -15,7 +15,7 @@ import time as _time
 import numpy as np
 
 from demcli.config.schema import Bool, Float, Int, List, Map, Optional, Section, Str, Tagged, Vector
-from demcli.errors import StageError
+from demcli.errors import InputError, StageError
 from demcli.stages.base import StageType, register_stage
 from demcli.state.fields import Field, register, register_group
 
@@ -242,7 +242,7 @@ def build_walls(cfg, case):
                       v=np.array([r[8] for r in rows]), extent=np.array([r[9] for r in rows]))
     bad = [walls.name[i] for i in range(len(walls)) if walls.control[i] == W.SERVO and not walls.prm[i, W.W_AREA] > 0]
     if bad:
-        raise StageError(f"servo walls {bad} need motion.area (only box faces know their area)")
+        raise InputError(f"servo walls {bad} need motion.area (only box faces know their area)")
     return walls
 
 
@@ -269,7 +269,7 @@ def make_system(ctx, cfg, groups, time=0.0, step=0):
     if cfg.time.dt is not None:
         dt = cfg.time.dt
         if dt > dt_crit and not cfg.safety.allow_unstable_dt:
-            raise StageError(f"stage {ctx.name}: time.dt = {dt:.4g} s is {dt / dt_crit:.3g} times the critical "
+            raise InputError(f"stage {ctx.name}: time.dt = {dt:.4g} s is {dt / dt_crit:.3g} times the critical "
                              f"step {dt_crit:.4g} s; lower it or use time.dt_factor")
     else:
         dt = cfg.time.dt_factor * dt_crit
@@ -319,6 +319,7 @@ def run(ctx, cfg, state_in):
             system.ebody[:] = c["ebody"]
         system.eacc[:] = c["eacc"]
         system.ke_limit = float(c["ke_limit"][0])
+        system.prime = False  # the stored loads are those of the interrupted run
         ctx.log(f"resuming from checkpoint at step {system.step} (t = {system.time:.6g} s)")
     else:
         system.ke_limit = cfg.safety.energy_limit * reference_energy(system)

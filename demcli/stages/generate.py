@@ -147,8 +147,7 @@ def run(ctx, cfg, state_in):
                   "radius": (template[None, :, 3] * radii[:, None]).reshape(-1),
                   "material": np.full(n * k, mat, np.int64)}
     bodies = {"x": pos, "v": vel, "q": q, "omega": np.zeros((n, 3)), "mass": mass, "inertia": inertia,
-              "id": np.arange(n, dtype=np.int64), "flags": np.zeros(n, np.int8),
-              "force": np.zeros((n, 3)), "torque": np.zeros((n, 3))}
+              "id": np.arange(n, dtype=np.int64), "flags": np.zeros(n, np.int8)}
     state = ctx.new_state(effects=())
     state.groups["bodies"] = bodies
     state.groups["spheres"] = sphere

@@ -9,6 +9,7 @@ from scipy.spatial import Delaunay
 from demcli.geometry import (
     GeometryError,
     convex_hull,
+    mass_properties,
     random_polyhedron,
     shape_indices,
 )
@@ -138,6 +139,17 @@ def test_random_polyhedra_match_delaunay_reference():
         assert np.isclose(poly.volume, vol, rtol=1e-10)
         assert np.allclose(poly.centroid, cen, rtol=0, atol=1e-12)
         assert np.allclose(poly.inertia, inertia, rtol=1e-9, atol=1e-9 * np.abs(inertia).max())
+
+
+def test_mass_properties_of_listed_faces():
+    # Given a triangular prism as 2 triangles and 3 quads (counter-clockwise from outside)
+    v = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 2], [1, 0, 2], [0, 1, 2]], float)
+    faces = [[0, 2, 1], [3, 4, 5], [0, 1, 4, 3], [1, 2, 5, 4], [2, 0, 3, 5]]
+    volume, centroid, inertia = mass_properties(v, faces)
+    assert np.isclose(volume, 1.0)
+    assert np.allclose(centroid, [1 / 3, 1 / 3, 1.0])
+    poly = convex_hull(v)
+    assert np.isclose(poly.volume, volume) and np.allclose(poly.inertia, inertia)
 
 
 def test_random_polyhedron_matches_monte_carlo():

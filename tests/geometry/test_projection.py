@@ -8,6 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
+from demcli.geometry import _kernels, projection
 from demcli.geometry import (
     convex_hull,
     fibonacci_sphere,
@@ -66,6 +67,28 @@ def test_exact_minimum_against_dense_sampling():
         assert exact >= sampled * (1.0 - 0.005)
         assert edges >= exact * (1.0 - 1e-12)
         assert np.isclose(projected_area(poly, u), exact, rtol=1e-12)
+
+
+def test_large_polyhedron_against_dense_sampling():
+    # 150 faces: more distinct planes than _SWEEP_ABOVE, so the circle sweep runs
+    poly = random_polyhedron(np.random.default_rng(12), 77, [0.03, 0.02, 0.012])
+    assert len(poly.circles) > projection._SWEEP_ABOVE
+    exact, _ = min_projection(poly)
+    sampled = projected_area(poly, FIB).min()
+    assert sampled * (1.0 - 0.005) <= exact <= sampled * (1.0 + 1e-12)
+
+
+def test_circle_sweep_matches_pair_enumeration():
+    rng = np.random.default_rng(13)
+    polys = [convex_hull(box(0.02, 0.02, 0.05)), convex_hull(regular_tetrahedron(0.03))]
+    polys += [random_polyhedron(rng, n, rng.uniform(0.01, 0.05, 3)) for n in (5, 9, 20, 45)]
+    for poly in polys:
+        c, w, v = poly.circles, poly.circle_weights, poly.vertices
+        pairs = _kernels.best_of_directions(c, w, _kernels.pair_directions(c), v, 1e-9)
+        sweep = _kernels.best_by_sweep(c, w, v, 1e-9)
+        assert np.allclose(sweep[3:], pairs[3:], rtol=1e-12, atol=0.0)  # area, L, W, size
+        assert np.isclose(np.linalg.norm(sweep[:3]), 1.0)
+        assert np.isclose(projected_area(poly, np.array(sweep[:3])), sweep[3], rtol=1e-12)
 
 
 def test_edge_directions_alone_can_miss_the_minimum():

@@ -1,0 +1,460 @@
+"""`make bench`: demcli's throughput next to the peer DEM codes, on identical sphere scenes.
+
+Runs, alternating (demcli, peer, demcli, peer, ...; all entries once, then all a second
+time), the peers' sphere scenes (default: dense, N = 10000, 20000 steps, dt = 1e-6 s):
+
+* demcli with 1 and 2 numba threads (bench/bench_spheres.py), plus 2 threads with
+  OMP_WAIT_POLICY=PASSIVE (see bench/README.md: on a shared 2-core machine the default
+  spinning OpenMP barrier collapses when another process takes a core);
+* LIGGGHTS, LAMMPS and YADE through ../shared/peers (run as peers/run_all.sh runs them:
+  from the folder that contains peers/, PEERS_WORK = a scratch folder, OMP_NUM_THREADS=1),
+  when their binaries are on PATH; otherwise it says how to install them and goes on.
+
+Then a scaling row (demcli, 1 thread, dense, N = 1e3, 1e4, 1e5 [1e6 with --big], the same
+number of steps for every N: the cost per particle-step should stay flat), and the geometry
+toolkit's bench/bench_sieve.py when it exists.
+
+Every run is a separate process whose LAST line is ``particle_steps_per_s=<number>``.
+The table (runs, median, ratio to LIGGGHTS) is printed and written to bench/results.md
+(with date, machine, load averages, demcli version and the command).
+
+Usage: python bench/run_bench.py [--quick] [--scenes dense_10000,drop_10000] [--repeat K]
+                                 [--skip-peers] [--skin S] [--peer-skin M] [--big]
+"""
+
+import argparse
+import datetime
+import os
+import platform
+import re
+import shlex
+import shutil
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+ROOT = os.path.dirname(HERE)
+PEERS_DEFAULT = os.path.normpath(os.path.join(ROOT, "..", "shared", "peers"))
+PEER_BIN = {"liggghts": "liggghts", "lammps": "lmp", "yade": "yade"}
+PEER_ORDER = ("liggghts", "lammps", "yade")
+RATE = re.compile(r"^particle_steps_per_s=([0-9.eE+-]+)\s*$")
+KV = re.compile(r"([A-Za-z_][A-Za-z_0-9]*)=([^\s]+)")
+
+
+# ---------------------------------------------------------------------------------------
+# command line
+# ---------------------------------------------------------------------------------------
+def parse_args(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+                                 formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__)
+    ap.add_argument("--quick", action="store_true",
+                    help="smoke test: dense_1000 for 2000 steps, small scaling row, small sieve run; "
+                         "writes no results file unless --out is given")
+    ap.add_argument("--scenes", default=None,
+                    help="comma list of VARIANT_N (VARIANT = drop|dense), default dense_10000 (--quick: dense_1000)")
+    ap.add_argument("--steps", type=int, default=None, help="steps per scene run (default 20000; --quick: 2000)")
+    ap.add_argument("--repeat", type=int, default=2, help="runs of every entry (default 2; the median is reported)")
+    ap.add_argument("--threads", default="1,2", help="demcli thread counts (default 1,2)")
+    ap.add_argument("--no-passive", action="store_true",
+                    help="leave out the demcli row with OMP_WAIT_POLICY=PASSIVE")
+    ap.add_argument("--skip-peers", action="store_true", help="run demcli only")
+    ap.add_argument("--peers", default="liggghts,lammps,yade", help="peers to run when installed")
+    ap.add_argument("--peers-dir", default=os.environ.get("DEMCLI_PEERS", PEERS_DEFAULT),
+                    help="the peers/ folder (default ../shared/peers or $DEMCLI_PEERS)")
+    ap.add_argument("--skin", type=float, default=0.3,
+                    help="demcli Verlet skin as a fraction of the sphere radius (r = 1 mm; default 0.3 = 0.3 mm)")
+    ap.add_argument("--peer-skin", type=float, default=3e-4,
+                    help="LIGGGHTS/LAMMPS neighbour skin in metres (DROP_SKIN; default 3e-4, LIGGGHTS' best; "
+                         "the peers' scripts default to 1e-3). YADE keeps its verletDist = 0.5 r")
+    ap.add_argument("--yade-max-s", type=float, default=240.0,
+                    help="skip a YADE run expected (from ../shared/peers/RESULTS.md) to take longer than this, "
+                         "and kill one that does; its RESULTS.md figure is shown instead (default 240)")
+    ap.add_argument("--timeout", type=float, default=1800.0, help="kill any single run after this many seconds")
+    ap.add_argument("--no-scaling", action="store_true", help="leave out the scaling row")
+    ap.add_argument("--scaling-steps", type=int, default=None,
+                    help="steps of every scaling run (default 2000; --quick: 200)")
+    ap.add_argument("--big", action="store_true", help="add N = 1e6 to the scaling row (~2 GB, minutes per run)")
+    ap.add_argument("--no-sieve", action="store_true", help="leave out bench/bench_sieve.py")
+    ap.add_argument("--out", default=None, help="results file (default bench/results.md; --quick: none)")
+    a = ap.parse_args(argv)
+    if a.scenes is None:
+        a.scenes = "dense_1000" if a.quick else "dense_10000"
+    if a.steps is None:
+        a.steps = 2000 if a.quick else 20000
+    if a.scaling_steps is None:
+        a.scaling_steps = 200 if a.quick else 2000
+    if a.out is None and not a.quick:
+        a.out = os.path.join(HERE, "results.md")
+    a.scene_list = []
+    for s in a.scenes.split(","):
+        m = re.fullmatch(r"(drop|dense)_(\d+)", s.strip())
+        if not m:
+            ap.error(f"bad scene {s!r}: expected drop_N or dense_N")
+        a.scene_list.append((m.group(1), int(m.group(2))))
+    a.thread_list = [int(t) for t in a.threads.split(",") if t.strip()]
+    a.peer_list = [p for p in PEER_ORDER if p in [q.strip() for q in a.peers.split(",")]]
+    if a.repeat < 1:
+        ap.error("--repeat must be >= 1")
+    return a
+
+
+# ---------------------------------------------------------------------------------------
+# helpers
+# ---------------------------------------------------------------------------------------
+def sh(cmd):
+    try:
+        return subprocess.run(cmd, shell=True, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
+                               text=True, timeout=20).stdout.strip()
+    except Exception:  # noqa: BLE001 - informational only
+        return ""
+
+
+def machine():
+    model = re.search(r"Model name:\s*(.+)", sh("lscpu"))
+    cpus = re.search(r"^CPU\(s\):\s*(\d+)", sh("lscpu"), re.M)
+    mem = re.search(r"Mem:\s+(\S+)", sh("free -h"))
+    return (f"{model.group(1).strip() if model else platform.processor() or '?'}, "
+            f"{cpus.group(1) if cpus else os.cpu_count()} cores, {mem.group(1) if mem else '?'} RAM, "
+            f"{platform.system()} {platform.release()}")
+
+
+def load():
+    return "%.2f %.2f %.2f" % os.getloadavg()
+
+
+def fmt(x):
+    return "—" if x is None else f"{x:.3g}"
+
+
+def run_proc(cmd, cwd, env, timeout):
+    """Run one benchmark process; returns a record with the parsed figures."""
+    rec = {"cmd": " ".join(shlex.quote(c) for c in cmd), "load_before": load(), "rate": None, "kv": {},
+           "error": None}
+    t0 = time.perf_counter()
+    try:
+        out = subprocess.run(cmd, cwd=cwd, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                             text=True, timeout=timeout)
+        text, rc = out.stdout, out.returncode
+    except subprocess.TimeoutExpired as e:
+        text = e.stdout.decode(errors="replace") if isinstance(e.stdout, bytes) else (e.stdout or "")
+        rc = None
+        rec["error"] = f"killed after {timeout:.0f} s"
+    rec["process_s"] = time.perf_counter() - t0
+    lines = [ln for ln in text.splitlines() if ln.strip()]
+    if lines and RATE.match(lines[-1]):
+        rec["rate"] = float(RATE.match(lines[-1]).group(1))
+    elif rec["error"] is None:
+        rec["error"] = f"rc={rc}, no particle_steps_per_s line: " + " | ".join(lines[-3:])[-300:]
+    for ln in lines:
+        if ln.startswith(("progress", "breakdown")):
+            if ln.startswith("breakdown Neighbor list builds"):
+                rec["kv"]["neighbour_rebuilds"] = ln.split("=")[-1].strip()
+            continue
+        for k, v in KV.findall(ln):
+            rec["kv"][k] = v
+    return rec
+
+
+def reference_rows(peers_dir):
+    """{(peer, variant, N): (run1, run2)} from the table in peers/RESULTS.md (may be empty)."""
+    ref = {}
+    try:
+        text = open(os.path.join(peers_dir, "RESULTS.md"), encoding="utf-8").read()
+    except OSError:
+        return ref
+    for ln in text.splitlines():
+        c = [x.strip() for x in ln.strip().strip("|").split("|")]
+        if len(c) >= 7 and c[0] in PEER_BIN and c[1] in ("drop", "dense") and c[2].isdigit():
+            try:
+                r = [float(x) for x in c[6].split("/")]
+            except ValueError:
+                continue
+            ref[(c[0], c[1], int(c[2]))] = (r, int(c[3]))
+    return ref
+
+
+# ---------------------------------------------------------------------------------------
+# entries
+# ---------------------------------------------------------------------------------------
+class Entry:
+    """One row of the table: a code/setting on a scene, run --repeat times."""
+
+    def __init__(self, scene, code, threads, cmd, cwd, env, note="", timeout=None):
+        self.scene, self.code, self.threads = scene, code, threads
+        self.cmd, self.cwd, self.env, self.note, self.timeout = cmd, cwd, env, note, timeout
+        self.runs = []          # records from run_proc
+        self.reference = None   # figures from RESULTS.md instead of runs
+
+    @property
+    def rates(self):
+        return [r["rate"] for r in self.runs if r["rate"] is not None]
+
+    @property
+    def median(self):
+        if self.reference is not None:
+            return statistics.median(self.reference)
+        return statistics.median(self.rates) if self.rates else None
+
+    def label(self):
+        return self.code + (f" ({self.note})" if self.note else "")
+
+
+def demcli_entries(a, variant, n, steps, threads_list, passive, env0):
+    scene = f"{variant}_{n}"
+    out = []
+    for t in threads_list:
+        cmd = [sys.executable, os.path.join(HERE, "bench_spheres.py"), str(n), variant, str(steps), str(t),
+               "--skin", repr(a.skin)]
+        out.append(Entry(scene, "demcli", t, cmd, ROOT, dict(env0), timeout=a.timeout))
+    if passive and any(t > 1 for t in threads_list):
+        t = max(threads_list)
+        cmd = [sys.executable, os.path.join(HERE, "bench_spheres.py"), str(n), variant, str(steps), str(t),
+               "--skin", repr(a.skin)]
+        out.append(Entry(scene, "demcli", t, cmd, ROOT, dict(env0, OMP_WAIT_POLICY="PASSIVE"),
+                         note="OMP_WAIT_POLICY=PASSIVE", timeout=a.timeout))
+    return out
+
+
+def peer_entries(a, variant, n, steps, installed, refs, work):
+    scene = f"{variant}_{n}"
+    shared = os.path.dirname(a.peers_dir)
+    env = dict(os.environ, PEERS_WORK=work, OMP_NUM_THREADS="1")
+    out = []
+    for p in a.peer_list:
+        if p == "yade":
+            cmd = ["yade", "-j1", "-n", "-x", "peers/yade/drop.py", str(n), str(steps), variant]
+            e = Entry(scene, p, 1, cmd, shared, dict(env), note="verletDist 0.5 r", timeout=a.yade_max_s)
+        else:
+            cmd = ["python3", f"peers/{p}/run_drop.py", str(n), str(steps), variant]
+            e = Entry(scene, p, 1, cmd, shared, dict(env, DROP_SKIN=repr(a.peer_skin)),
+                      note=f"skin {a.peer_skin * 1e3:g} mm", timeout=a.timeout)
+        ref = refs.get((p, variant, n))
+        ref_ok = ref is not None and ref[1] == steps
+        if p not in installed:
+            if ref_ok:
+                e.reference = ref[0]
+                e.note = "RESULTS.md, not run here" + ("" if p == "yade" else ", skin 1 mm")
+                out.append(e)
+            continue
+        if p == "yade" and ref_ok:
+            expected = n * steps / min(ref[0])
+            if expected > a.yade_max_s:
+                e.reference = ref[0]
+                e.note = f"RESULTS.md, not run here: ~{expected:.0f} s per run > {a.yade_max_s:.0f} s"
+        out.append(e)
+    return out
+
+
+def interleave(dem, peers):
+    """demcli, peer, demcli, peer, ... (leftovers at the end)."""
+    out = []
+    for i in range(max(len(dem), len(peers))):
+        if i < len(dem):
+            out.append(dem[i])
+        if i < len(peers):
+            out.append(peers[i])
+    return out
+
+
+def run_entry(e, k):
+    if e.reference is not None:
+        return
+    print(f"  [{time.strftime('%H:%M:%S')}] run {k}: {e.scene} {e.label()} threads={e.threads} "
+          f"(load {load()}) ...", end="", flush=True)
+    rec = run_proc(e.cmd, e.cwd, e.env, e.timeout)
+    e.runs.append(rec)
+    if rec["rate"] is not None:
+        print(f" {rec['rate']:.3g} particle-steps/s ({rec['process_s']:.1f} s)", flush=True)
+    else:
+        print(f" FAILED: {rec['error']}", flush=True)
+        if e.code == "yade" and "killed" in (rec["error"] or "") and e.refback is not None:
+            e.reference = e.refback
+            e.note = f"RESULTS.md: run {k} here took > {e.timeout:.0f} s"
+
+
+# ---------------------------------------------------------------------------------------
+# report
+# ---------------------------------------------------------------------------------------
+def contacts(e):
+    for r in reversed(e.runs):
+        kv = r["kv"]
+        if "contacts_pp" in kv:
+            return f"{kv['contacts_pp']} + {kv.get('contacts_wall', '?')}"
+    return "—"
+
+
+def scene_table(entries, refs, repeat, steps):
+    head = ["scene", "code", "threads", "particle-steps/s " + " / ".join(f"run{k + 1}" for k in range(repeat)),
+            "median", "ratio to LIGGGHTS", "contacts at end (p-p + wall)", "rebuilds"]
+    rows = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    by_scene = {}
+    for e in entries:
+        by_scene.setdefault(e.scene, []).append(e)
+    for scene, es in by_scene.items():
+        lig = next((e for e in es if e.code == "liggghts" and e.median is not None), None)
+        base, base_note = (lig.median, "") if lig else (None, "")
+        if lig and lig.reference is not None:
+            base_note = " (vs RESULTS.md)"
+        if base is None:
+            variant, n = scene.split("_")
+            ref = refs.get(("liggghts", variant, int(n)))
+            if ref and ref[1] == steps:
+                base, base_note = statistics.median(ref[0]), " (vs RESULTS.md, skin 1 mm)"
+        order = sorted(es, key=lambda e: (e.code != "demcli", PEER_ORDER.index(e.code) if e.code in PEER_ORDER
+                                          else -1, e.threads, e.note))
+        for e in order:
+            if e.reference is not None:
+                runs = " / ".join(fmt(x) for x in e.reference) + " (ref)"
+            else:
+                runs = " / ".join(fmt(r["rate"]) if r["rate"] is not None else "fail" for r in e.runs) or "—"
+            med = e.median
+            ratio = f"{med / base:.2f}{base_note}" if med is not None and base else "—"
+            reb = next((r["kv"].get("neighbour_rebuilds") for r in reversed(e.runs)
+                        if "neighbour_rebuilds" in r["kv"]), "—")
+            rows.append(f"| {scene} | {e.label()} | {e.threads} | {runs} | {fmt(med)} | {ratio} | "
+                        f"{contacts(e)} | {reb} |")
+    return rows
+
+
+def scaling_table(entries, repeat):
+    head = ["N", "steps", "particle-steps/s " + " / ".join(f"run{k + 1}" for k in range(repeat)), "median",
+            "ns per particle-step", "cost relative to first N", "contacts at end"]
+    rows = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    first = None
+    for e in entries:
+        med = e.median
+        if first is None and med:
+            first = med
+        runs = " / ".join(fmt(r["rate"]) if r["rate"] is not None else "fail" for r in e.runs)
+        steps = e.cmd[4]
+        rel = f"{first / med:.2f}" if med and first else "—"
+        rows.append(f"| {e.scene.split('_')[1]} | {steps} | {runs} | {fmt(med)} | "
+                    f"{1e9 / med if med else float('nan'):.1f} | {rel} | {contacts(e)} |")
+    return rows
+
+
+def run_sieve(quick):
+    path = os.path.join(HERE, "bench_sieve.py")
+    if not os.path.exists(path):
+        return None
+    cmd = [sys.executable, path] + (["100", "2"] if quick else [])
+    print(f"  [{time.strftime('%H:%M:%S')}] {os.path.relpath(path, ROOT)} ...", end="", flush=True)
+    try:
+        out = subprocess.run(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                             timeout=900)
+        lines = [ln for ln in out.stdout.splitlines() if ln.strip()]
+        ok = out.returncode == 0 and lines and lines[-1].startswith("sieve_sizes_per_s=")
+    except subprocess.TimeoutExpired:
+        lines, ok = ["killed after 900 s"], False
+    text = " ; ".join(lines[-2:]) if ok else "FAILED: " + " | ".join(lines[-3:])[-300:]
+    print(" " + text, flush=True)
+    return " ".join(shlex.quote(c) for c in ["python"] + cmd[1:]).replace(ROOT + "/", ""), text
+
+
+def main(argv=None):
+    a = parse_args(argv)
+    import demcli  # the venv's demcli (version line only)
+
+    started = datetime.datetime.now().astimezone()
+    load0 = load()
+    command = "python bench/run_bench.py" + "".join(" " + shlex.quote(x) for x in (argv if argv is not None
+                                                                                   else sys.argv[1:]))
+    print(f"demcli {demcli.__version__} bench, {started:%Y-%m-%d %H:%M %Z}, {machine()}, load {load0}")
+
+    # which peers can run
+    installed = []
+    if not a.skip_peers:
+        missing = [p for p in a.peer_list if shutil.which(PEER_BIN[p]) is None]
+        installed = [p for p in a.peer_list if p not in missing]
+        if not os.path.isdir(a.peers_dir):
+            print(f"NOTE: no peers folder at {a.peers_dir}: demcli only (set --peers-dir or $DEMCLI_PEERS)")
+            installed, missing = [], []
+        elif missing:
+            print(f"NOTE: peer(s) not installed: {', '.join(PEER_BIN[p] for p in missing)}. Install them with\n"
+                  f"      bash {os.path.relpath(os.path.join(a.peers_dir, 'install.sh'), ROOT)}   "
+                  f"(as root; Debian packages, ~1.5 min, 2.3 GB)\n"
+                  f"      Going on with {', '.join(['demcli'] + installed)}; missing peers are shown with "
+                  f"their ../shared/peers/RESULTS.md figures.")
+    refs = reference_rows(a.peers_dir) if os.path.isdir(a.peers_dir) else {}
+
+    work = tempfile.mkdtemp(prefix="demcli_bench_peers_")
+    env0 = dict(os.environ)
+    entries = []
+    for variant, n in a.scene_list:
+        dem = demcli_entries(a, variant, n, a.steps, a.thread_list, not a.no_passive, env0)
+        peers = [] if a.skip_peers else peer_entries(a, variant, n, a.steps, installed, refs, work)
+        for e in peers:
+            ref = refs.get((e.code, variant, n))
+            e.refback = ref[0] if ref and ref[1] == a.steps else None
+        entries.append(interleave(dem, peers))
+
+    print(f"scenes: {', '.join(f'{v}_{n}' for v, n in a.scene_list)}, {a.steps} steps, {a.repeat} run(s) each, "
+          f"alternating")
+    for k in range(1, a.repeat + 1):
+        for group in entries:
+            for e in group:
+                run_entry(e, k)
+    flat = [e for g in entries for e in g]
+
+    scaling = []
+    if not a.no_scaling:
+        ns = [1000, 10000] + ([] if a.quick else [100000]) + ([1000000] if a.big else [])
+        scaling = [demcli_entries(a, "dense", n, a.scaling_steps, [1], False, env0)[0] for n in ns]
+        print(f"scaling row: demcli, 1 thread, dense, N = {', '.join(map(str, ns))}, {a.scaling_steps} steps")
+        for k in range(1, a.repeat + 1):
+            for e in scaling:
+                run_entry(e, k)
+
+    sieve = None if a.no_sieve else run_sieve(a.quick)
+    load1 = load()
+    finished = datetime.datetime.now().astimezone()
+    shutil.rmtree(work, ignore_errors=True)
+
+    md = [f"# demcli benchmark: {started:%Y-%m-%d %H:%M %Z}", "",
+          f"- demcli {demcli.__version__} (git {sh('git -C ' + shlex.quote(ROOT) + ' rev-parse --short HEAD') or '?'}"
+          f"{', uncommitted changes' if sh('git -C ' + shlex.quote(ROOT) + ' status --porcelain') else ''}), "
+          f"Python {platform.python_version()}",
+          f"- machine: {machine()}",
+          f"- load average (1/5/15 min): {load0} at start, {load1} at the end "
+          f"({(finished - started).total_seconds() / 60:.1f} min)",
+          f"- command: `{command}`",
+          f"- scenes: the peers' sphere scenes (../shared/peers/common/drop_setup.py), {a.steps} steps, dt 1e-6 s; "
+          f"each entry run {a.repeat}x, alternating demcli and peers; the median is the figure to compare",
+          f"- demcli skin {a.skin:g} r = {a.skin:g} mm; LIGGGHTS/LAMMPS skin {a.peer_skin * 1e3:g} mm "
+          f"(DROP_SKIN={a.peer_skin:g}); YADE verletDist 0.5 r (its default, drop.py has no option); "
+          "peers single-threaded (OMP_NUM_THREADS=1, one MPI rank, yade -j1)",
+          "- particle-steps/s = N x steps / seconds of the time-stepping loop only (no start-up, set-up or JIT)",
+          ""]
+    md += scene_table(flat, refs, a.repeat, a.steps)
+    if scaling:
+        md += ["", f"Scaling (demcli, 1 thread, dense scene, {a.scaling_steps} steps from the initial lattice; "
+                   "the cost per particle-step should stay flat):", ""]
+        md += scaling_table(scaling, a.repeat)
+    if sieve:
+        md += ["", f"Geometry toolkit: `{sieve[0]}`: {sieve[1]}"]
+    fails = [(e, r) for e in flat + scaling for r in e.runs if r["rate"] is None]
+    if fails:
+        md += ["", "Failed runs:"] + [f"- {e.scene} {e.label()}: {r['error']}" for e, r in fails]
+    md += ["", "<details><summary>runs (load average before each run, command)</summary>", ""]
+    for e in flat + scaling:
+        for k, r in enumerate(e.runs, 1):
+            kv = r["kv"]
+            md.append(f"- {e.scene} {e.label()} t={e.threads} run{k}: {fmt(r['rate'])} particle-steps/s, "
+                      f"loop {kv.get('loop_wall_s', '?')} s, process {r['process_s']:.1f} s, "
+                      f"load {r['load_before']}: `{r['cmd'].replace(ROOT + '/', '')}`")
+    md += ["", "</details>", ""]
+    text = "\n".join(md)
+    print()
+    print(text)
+    if a.out:
+        with open(a.out, "w", encoding="utf-8") as f:
+            f.write(text)
+        print(f"written to {os.path.relpath(a.out)}")
+    return 0 if not fails else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

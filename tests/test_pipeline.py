@@ -1,0 +1,183 @@
+"""The staged pipeline: outputs, skipping, determinism, resume, guards, only-declared effects."""
+
+import subprocess
+import sys
+
+import h5py
+import meshio
+import numpy as np
+import pytest
+
+from demcli import run_case
+from demcli.errors import StageError
+
+
+def _datasets(path):
+    """Every dataset of an HDF5 file as {name: array} (provenance attributes excluded)."""
+    out = {}
+    with h5py.File(path, "r") as f:
+        f.visititems(lambda name, obj: out.__setitem__(name, obj[()]) if isinstance(obj, h5py.Dataset) else None)
+    return out
+
+
+def _assert_identical(a, b):
+    da, db = _datasets(a), _datasets(b)
+    assert sorted(da) == sorted(db)
+    for k in da:
+        assert np.array_equal(np.asarray(da[k]), np.asarray(db[k])), k
+
+
+def test_run_writes_states_snapshots_records(smoke_case, tmp_path):
+    # Given the smoke case
+    # When run
+    res = run_case(smoke_case, out=tmp_path, quiet=True)
+    # Then every stage wrote its state, the dem stage its VTU series and records
+    assert [r.name for r in res] == ["pour", "settle"] and not any(r.skipped for r in res)
+    assert (tmp_path / "00-pour.h5").exists() and (tmp_path / "01-settle.h5").exists()
+    assert (tmp_path / "settle" / "spheres.pvd").exists()
+    assert (tmp_path / "records" / "settle_dem.csv").read_text().startswith("time[s],")
+    # and the snapshots carry the fields ParaView colours by
+    mesh = meshio.read(tmp_path / "settle" / "spheres_000001.vtu")
+    for name in ("radius", "velocity", "body_id", "material"):
+        assert name in mesh.point_data
+    assert len(mesh.points) == 150
+    assert np.all(mesh.point_data["radius"] >= 1e-3 - 1e-12)
+
+
+def test_unchanged_stages_are_skipped_and_edits_rerun(smoke_case, tmp_path):
+    # Given a finished run
+    run_case(smoke_case, out=tmp_path, quiet=True)
+    # When run again unchanged, then nothing re-runs
+    assert all(r.skipped for r in run_case(smoke_case, out=tmp_path, quiet=True))
+    # When the second stage's config changes, only it re-runs
+    res = run_case(smoke_case, out=tmp_path, quiet=True, overrides=["stages.settle.time.steps=2000"])
+    assert [r.skipped for r in res] == [True, False]
+    # When --force is given, both re-run
+    assert not any(r.skipped for r in run_case(smoke_case, out=tmp_path, quiet=True, force=True,
+                                                 overrides=["stages.settle.time.steps=2000"]))
+
+
+def test_same_case_and_seed_bit_identical_for_1_and_2_threads(smoke_case, tmp_path):
+    # Given the same case run with 1 thread and with 2 threads
+    run_case(smoke_case, out=tmp_path / "a", quiet=True, threads=1)
+    run_case(smoke_case, out=tmp_path / "b", quiet=True, threads=2)
+    # Then every dataset of every state is bit-identical
+    for name in ("00-pour.h5", "01-settle.h5"):
+        _assert_identical(tmp_path / "a" / name, tmp_path / "b" / name)
+
+
+def test_other_seed_differs(smoke_case, tmp_path):
+    run_case(smoke_case, out=tmp_path / "a", quiet=True, only=None)
+    run_case(smoke_case, out=tmp_path / "b", quiet=True, overrides=["seed=8"])
+    xa = _datasets(tmp_path / "a" / "00-pour.h5")["bodies/x"]
+    xb = _datasets(tmp_path / "b" / "00-pour.h5")["bodies/x"]
+    assert not np.array_equal(xa, xb)
+
+
+def test_interrupted_and_resumed_equals_uninterrupted(smoke_case, tmp_path, monkeypatch):
+    # Given an uninterrupted reference run
+    run_case(smoke_case, out=tmp_path / "ref", quiet=True)
+    # When a run is interrupted (Ctrl-C) in the middle of the dem stage
+    from demcli.engine import system as system_mod
+
+    real = system_mod.System.advance
+    calls = {"n": 0}
+
+    def interrupted(self, n):
+        calls["n"] += 1
+        if calls["n"] == 12:
+            raise KeyboardInterrupt
+        return real(self, n)
+
+    monkeypatch.setattr(system_mod.System, "advance", interrupted)
+    with pytest.raises(StageError, match="interrupted"):
+        run_case(smoke_case, out=tmp_path / "run", quiet=True)
+    assert (tmp_path / "run" / "01-settle.ckpt.h5").exists()
+    assert not (tmp_path / "run" / "01-settle.h5").exists()
+    # and resumed
+    monkeypatch.setattr(system_mod.System, "advance", real)
+    res = run_case(smoke_case, out=tmp_path / "run", quiet=True, resume=True)
+    # Then the first stage is skipped, the checkpoint is gone, and the result is bit-identical
+    assert [r.skipped for r in res] == [True, False]
+    assert not (tmp_path / "run" / "01-settle.ckpt.h5").exists()
+    _assert_identical(tmp_path / "ref" / "01-settle.h5", tmp_path / "run" / "01-settle.h5")
+
+
+def _poison(path, fn):
+    with h5py.File(path, "r+") as f:
+        fn(f)
+
+
+@pytest.mark.parametrize("poison, message", [
+    (lambda f: f["bodies/v"].__setitem__((3, 0), np.nan), "NaN or Inf"),
+    (lambda f: f["bodies/x"].__setitem__(1, f["bodies/x"][0] + [1.0e-4, 0, 0]), "overlap beyond the limit"),
+])
+def test_guards_stop_with_diagnosis_and_keep_last_good_state(smoke_case, tmp_path, poison, message):
+    # Given a first-stage state with an injected defect
+    run_case(smoke_case, out=tmp_path, quiet=True, only=None, overrides=["stages.settle.time.steps=10"])
+    _poison(tmp_path / "00-pour.h5", poison)
+    # When the dem stage runs on it
+    with pytest.raises(StageError) as err:
+        run_case(smoke_case, out=tmp_path, quiet=True, only="settle")
+    # Then it stops with a diagnosis naming the guard and the time step, and keeps the last good state
+    text = str(err.value)
+    assert message in text and "critical" in text and "01-settle.lastgood.h5" in text
+    good = _datasets(tmp_path / "01-settle.lastgood.h5")
+    assert np.isfinite(good["bodies/x"]).all() if "NaN" not in message else True
+
+
+def test_runaway_energy_guard(smoke_case, tmp_path):
+    # Given a time step four times the critical one (allowed explicitly for this test)
+    over = ["stages.settle.time.dt=1e-4", "stages.settle.safety.allow_unstable_dt=true",
+            "stages.settle.safety.check_every=10"]
+    # When run
+    with pytest.raises(StageError) as err:
+        run_case(smoke_case, out=tmp_path, quiet=True, overrides=over)
+    # Then a guard stops it (energy, overlap or NaN, whichever trips first) and says the step is too large
+    text = str(err.value)
+    assert "stopped at step" in text and "of the critical" in text
+    assert (tmp_path / "01-settle.lastgood.h5").exists()
+
+
+def test_cli_exit_code_1_on_instability(smoke_case, tmp_path):
+    # Given the same unstable run through the command line
+    cmd = [sys.executable, "-m", "demcli", "run", str(smoke_case), "--out", str(tmp_path), "--quiet",
+           "--set", "stages.settle.time.dt=1e-4", "--set", "stages.settle.safety.allow_unstable_dt=true"]
+    proc = subprocess.run(cmd, capture_output=True, text=True)
+    # Then exit code 1, a message, no traceback
+    assert proc.returncode == 1, proc.stderr
+    assert "Traceback" not in proc.stderr and "last good state kept in" in proc.stderr
+
+
+def test_undeclared_effects_allocate_nothing_and_run_no_pass(tmp_path):
+    # Given a scene that declares only gravity
+    from demcli.engine.materials import ContactModel, Material
+    from demcli.engine.plan import make_plan
+    from demcli.engine.system import Dynamics, System, Walls
+    from demcli.kernels import layout as K
+
+    n = 20
+    x = np.stack([np.arange(n) * 1.9e-3, np.zeros(n), np.zeros(n)], axis=1)  # overlapping chain
+    groups = {"bodies": {"x": x, "v": np.zeros((n, 3)), "omega": np.zeros((n, 3)),
+                         "q": np.tile([1.0, 0, 0, 0], (n, 1)), "mass": np.full(n, 1e-5),
+                         "inertia": np.full((n, 3), 4e-12), "flags": np.zeros(n, np.int8), "id": np.arange(n)},
+              "spheres": {"body": np.arange(n), "offset": np.zeros((n, 3)), "radius": np.full(n, 1e-3),
+                          "material": np.zeros(n, np.int64)}}
+    plan = make_plan(["gravity"])
+    s = System(groups, [Material("m", 2500.0, young=1e7)], ContactModel(), plan, Walls(), Dynamics(), dt=1e-7)
+    s.advance(50)
+    nl = s.nl
+    # Then friction, rolling and energy arrays have no rows although contacts exist
+    assert nl[10].sum() > 0
+    assert nl[5].shape[0] == 0 and nl[6].shape[0] == 0 and nl[11].shape[0] == 0
+    assert nl[8].shape[0] == 0 and nl[9].shape[0] == 0  # no torque rows
+    assert s.esph.shape[0] == 0 and s.ebody.shape[0] == 0 and len(s.L) == 0
+    # and the kernel never entered their passes, while the declared ones ran every step
+    c = dict(zip(K.COUNTERS, s.counters))
+    assert c["friction"] == c["rolling"] == c["energy"] == c["damping"] == 0
+    assert c["members"] == c["body"] == c["wallmove"] == c["wallctrl"] == 0
+    assert c["kick"] == 50
+    assert c["gravity"] == c["pairs"] == c["gather"] == 51  # + the priming evaluation of F(x_0)
+    # and the plan lists no pass or array for them
+    assert not any(p.startswith(("pairs:tangential", "pairs:rolling", "walls:")) for p in plan.passes)
+    assert not any(f[0] in ("contact_ft", "contact_mr", "pair_losses") for f in plan.fields)
