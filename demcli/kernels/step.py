@@ -29,7 +29,7 @@ from numba import prange
 
 from demcli.jit import njit
 from demcli.kernels import quat
-from demcli.kernels.contact import HERTZ, P_ESTAR, P_KN, contact_law, strain_energy
+from demcli.kernels.contact import HERTZ, P_CN, P_ESTAR, P_KN, P_ZETA, contact_law, strain_energy
 from demcli.kernels.neighbors import build_pairs, build_reverse, build_wall_pairs, carry_history
 from demcli.kernels.walls import (FORCE, SERVO, VELOCITY, W_AMPLITUDE, W_AREA, W_FREQ, W_GAIN,
                                   W_MASS, W_TARGET, W_VMAX, wall_distance)
@@ -231,10 +231,17 @@ def _wall_contact(i, k, w, xs, vs, ws, rad, smat, smass, wkind, wpoint, wnormal,
     tx = -a * (ny * fz - nz * fy) + mx
     ty = -a * (nz * fx - nx * fz) + my
     tz = -a * (nx * fy - ny * fx) + mz
+    # stiffness the wall's servo sees: spring plus dashpot over one step (a change of wall
+    # velocity changes the dashpot force at once), k_n + c_n / dt
+    m = smass[i]
     if law == HERTZ:
         kn = 2.0 * p[P_ESTAR] * math.sqrt(ri * delta)
+        cn = 2.0 * math.sqrt(5.0 / 6.0) * p[P_ZETA] * math.sqrt(kn * m)
     else:
         kn = p[P_KN]
+        cn = p[P_CN] + 2.0 * p[P_ZETA] * math.sqrt(m * kn)
+    if dt > 0.0:
+        kn += cn / dt
     return fx, fy, fz, tx, ty, tz, ed, ef, kn
 
 

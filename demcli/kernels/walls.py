@@ -25,7 +25,7 @@ W_TARGET = 0      # FORCE: applied force [N] along -normal; SERVO: target stress
 W_AMPLITUDE = 1   # FORCE: sinusoidal amplitude [N]
 W_FREQ = 2        # FORCE: frequency [Hz]
 W_MASS = 3        # FORCE: wall mass [kg]
-W_GAIN = 4        # SERVO: relaxation factor alpha in (0, 1] (PFC servo gain G = alpha A / (sum k_n dt))
+W_GAIN = 4        # SERVO: relaxation alpha in (0, 1]: gain G = alpha A / (sum (k_n + c_n/dt) dt), PFC-style
 W_VMAX = 5        # SERVO: speed limit [m/s]
 W_AREA = 6        # SERVO: loaded area [m^2]
 N_WPARAMS = 7
