@@ -42,6 +42,13 @@ def describe_case(path, overrides=()):
     for k, cfg in enumerate(case.stages):
         lines.append(f"\n[{k:02d}] {cfg.name} ({cfg.type})")
         if cfg.type != "dem":
+            if cfg.type == "gradation":
+                from demcli.stages.gradation import TOTALS, compute
+
+                res = compute(cfg)
+                unit = "m^2" if res["dim"] == 2 else "m^3"
+                lines.append(f"  {len(res['class_share'])} classes ({cfg.volumetrics.kind}); "
+                             + ", ".join(f"{k} {v:.4g} {unit}" for k, v in zip(TOTALS, res["totals"])))
             if cfg.type == "generate":
                 lines.append(f"  {cfg.count} particles, radius {cfg.radius.min:g}-{cfg.radius.max:g} m, "
                              f"{cfg.placement} placement, material {cfg.material}")

@@ -144,14 +144,14 @@ class StageContext:
         self.log(message)
         raise StageError(message, state_file=self.lastgood_path)
 
-    def write_records(self, table, x, ys, logy=False, suffix=None):
+    def write_records(self, table, x, ys, logy=False, suffix=None, logx=False):
         """CSV of a record table and a PNG of ``ys`` against ``x`` in ``records/``."""
         folder = self.runner.run_dir / "records"
         folder.mkdir(parents=True, exist_ok=True)
         stem = f"{self.name}_{table.name}"
         table.write_csv(folder / f"{stem}.csv")
         png = folder / f"{stem}{'_' + suffix if suffix else ''}.png"
-        table.plot(png, x, ys, logy=logy, title=f"{self.runner.name}: {self.name}")
+        table.plot(png, x, ys, logx=logx, logy=logy, title=f"{self.runner.name}: {self.name}")
 
 
 class Runner:

@@ -62,7 +62,7 @@ def case_schema():
         "dimension": Int(min=2, max=3, default=3, doc="3, or 2 for planar motion (disks)"),
         "thickness": Float("m", min=0, min_inclusive=False, default=1.0,
                            doc="2D only: out-of-plane thickness for disk masses"),
-        "materials": Map(MATERIAL, key_pattern=NAME, min_len=1, doc="materials by name"),
+        "materials": Map(MATERIAL, key_pattern=NAME, default={}, doc="materials by name"),
         "stages": List(Tagged("type", variants), min_len=1, unique_by="name", doc="stages, run in order"),
     }, check=_material_refs)
 

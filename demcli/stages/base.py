@@ -44,6 +44,6 @@ def register_stage(stage_type):
 
 def load_stage_types():
     """Import every built-in stage module (registers them) and return the registry."""
-    from demcli.stages import dem, generate  # noqa: F401
+    from demcli.stages import dem, generate, gradation  # noqa: F401
 
     return STAGE_TYPES
