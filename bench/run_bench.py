@@ -121,6 +121,20 @@ def machine():
             f"{platform.system()} {platform.release()}")
 
 
+def source_digest():
+    """Digest of demcli's sources (the tree is shared: a change during the run is reported)."""
+    import hashlib
+
+    h = hashlib.sha1()
+    for dirpath, dirnames, files in sorted(os.walk(os.path.join(ROOT, "demcli"))):
+        dirnames.sort()
+        for fn in sorted(files):
+            if fn.endswith(".py"):
+                with open(os.path.join(dirpath, fn), "rb") as f:
+                    h.update(fn.encode() + f.read())
+    return h.hexdigest()[:12]
+
+
 def load():
     return "%.2f %.2f %.2f" % os.getloadavg()
 
@@ -187,6 +201,7 @@ class Entry:
         self.cmd, self.cwd, self.env, self.note, self.timeout = cmd, cwd, env, note, timeout
         self.runs = []          # records from run_proc
         self.reference = None   # figures from RESULTS.md instead of runs
+        self.refback = None     # RESULTS.md figures to fall back on if a YADE run is killed
 
     @property
     def rates(self):
@@ -360,6 +375,8 @@ def main(argv=None):
 
     started = datetime.datetime.now().astimezone()
     load0 = load()
+    digest0 = source_digest()
+    git0 = sh("git -C " + shlex.quote(ROOT) + " rev-parse --short HEAD") or "?"
     command = "python bench/run_bench.py" + "".join(" " + shlex.quote(x) for x in (argv if argv is not None
                                                                                    else sys.argv[1:]))
     print(f"demcli {demcli.__version__} bench, {started:%Y-%m-%d %H:%M %Z}, {machine()}, load {load0}")
@@ -410,13 +427,17 @@ def main(argv=None):
 
     sieve = None if a.no_sieve else run_sieve(a.quick)
     load1 = load()
+    digest1 = source_digest()
+    git1 = sh("git -C " + shlex.quote(ROOT) + " rev-parse --short HEAD") or "?"
     finished = datetime.datetime.now().astimezone()
     shutil.rmtree(work, ignore_errors=True)
 
     md = [f"# demcli benchmark: {started:%Y-%m-%d %H:%M %Z}", "",
-          f"- demcli {demcli.__version__} (git {sh('git -C ' + shlex.quote(ROOT) + ' rev-parse --short HEAD') or '?'}"
+          f"- demcli {demcli.__version__} (git {git0}{'' if git1 == git0 else ' -> ' + git1}"
           f"{', uncommitted changes' if sh('git -C ' + shlex.quote(ROOT) + ' status --porcelain') else ''}), "
-          f"Python {platform.python_version()}",
+          f"Python {platform.python_version()}"
+          + ("" if digest0 == digest1 else "; **WARNING: demcli's sources changed during the run**, runs "
+             "before and after the change used different code (a jump in warmup_s marks the recompile)"),
           f"- machine: {machine()}",
           f"- load average (1/5/15 min): {load0} at start, {load1} at the end "
           f"({(finished - started).total_seconds() / 60:.1f} min)",
@@ -442,8 +463,11 @@ def main(argv=None):
     for e in flat + scaling:
         for k, r in enumerate(e.runs, 1):
             kv = r["kv"]
+            extra = "".join(f", {name} {kv[key]}" for key, name in (
+                ("contacts_total", "contacts"), ("neighbour_rebuilds", "rebuilds"), ("warmup_s", "warmup_s"))
+                if key in kv)
             md.append(f"- {e.scene} {e.label()} t={e.threads} run{k}: {fmt(r['rate'])} particle-steps/s, "
-                      f"loop {kv.get('loop_wall_s', '?')} s, process {r['process_s']:.1f} s, "
+                      f"loop {kv.get('loop_wall_s', '?')} s, process {r['process_s']:.1f} s{extra}, "
                       f"load {r['load_before']}: `{r['cmd'].replace(ROOT + '/', '')}`")
     md += ["", "</details>", ""]
     text = "\n".join(md)

@@ -136,68 +136,75 @@ def _place_members(x, v, w, q, xs, vs, ws, sbody, soff, xref, lim2, rebuild):
 
 
 @njit(parallel=True)
-def _pair_forces(pi, pj, xs, vs, ws, rad, smat, smass, prm, law, dt, ft, mr, friction, rolling,
+def _pair_forces(start, pj, xs, vs, ws, rad, smat, smass, prm, law, dt, ft, mr, friction, rolling,
                  energy, fc, ti, tj, act, epair):
-    """Force, torques and dissipation of every listed pair, each pair writing its own row."""
-    for c in prange(pi.shape[0]):
-        i = pi[c]
-        j = pj[c]
-        dx = xs[i, 0] - xs[j, 0]
-        dy = xs[i, 1] - xs[j, 1]
-        dz = xs[i, 2] - xs[j, 2]
+    """Force, torques and dissipation of every listed pair, each pair writing its own row.
+
+    Walks the CSR rows (sphere i, then its j > i), so i's data is loaded once per row.
+    """
+    for i in prange(start.shape[0] - 1):
+        xi0 = xs[i, 0]
+        xi1 = xs[i, 1]
+        xi2 = xs[i, 2]
         ri = rad[i]
-        rj = rad[j]
-        rs = ri + rj
-        d2 = dx * dx + dy * dy + dz * dz
-        if d2 >= rs * rs:
-            act[c] = 0
-            if friction:
-                ft[c, 0] = 0.0
-                ft[c, 1] = 0.0
-                ft[c, 2] = 0.0
-            if rolling:
-                mr[c, 0] = 0.0
-                mr[c, 1] = 0.0
-                mr[c, 2] = 0.0
-            continue
-        act[c] = 1
-        d = math.sqrt(d2)
-        inv = 1.0 / d
-        nx = dx * inv
-        ny = dy * inv
-        nz = dz * inv
-        delta = rs - d
-        ai = ri - 0.5 * delta
-        aj = rj - 0.5 * delta
-        # contact-point velocities: v + w x (xc - x)
-        wix, wiy, wiz = ws[i, 0], ws[i, 1], ws[i, 2]
-        wjx, wjy, wjz = ws[j, 0], ws[j, 1], ws[j, 2]
-        vx = vs[i, 0] - vs[j, 0] - ai * (wiy * nz - wiz * ny) - aj * (wjy * nz - wjz * ny)
-        vy = vs[i, 1] - vs[j, 1] - ai * (wiz * nx - wix * nz) - aj * (wjz * nx - wjx * nz)
-        vz = vs[i, 2] - vs[j, 2] - ai * (wix * ny - wiy * nx) - aj * (wjx * ny - wjy * nx)
-        mi = smass[i]
-        mj = smass[j]
-        fx, fy, fz, mx, my, mz, ed, ef = contact_law(
-            law, prm[smat[i], smat[j]], delta, nx, ny, nz, vx, vy, vz,
-            wix - wjx, wiy - wjy, wiz - wjz, ri * rj / rs, mi * mj / (mi + mj), dt,
-            ft, mr, c, friction, rolling)
-        fc[c, 0] = fx
-        fc[c, 1] = fy
-        fc[c, 2] = fz
-        if friction or rolling:
-            # torque = (xc - x) x F, xc - xi = -ai n, xc - xj = aj n
-            cx = ny * fz - nz * fy
-            cy = nz * fx - nx * fz
-            cz = nx * fy - ny * fx
-            ti[c, 0] = -ai * cx + mx
-            ti[c, 1] = -ai * cy + my
-            ti[c, 2] = -ai * cz + mz
-            tj[c, 0] = -aj * cx - mx
-            tj[c, 1] = -aj * cy - my
-            tj[c, 2] = -aj * cz - mz
-        if energy:
-            epair[c, 0] = ed
-            epair[c, 1] = ef
+        for c in range(start[i], start[i + 1]):
+            j = pj[c]
+            dx = xi0 - xs[j, 0]
+            dy = xi1 - xs[j, 1]
+            dz = xi2 - xs[j, 2]
+            rj = rad[j]
+            rs = ri + rj
+            d2 = dx * dx + dy * dy + dz * dz
+            if d2 >= rs * rs:
+                if act[c]:  # a contact that just opened drops its history (most listed pairs never touch)
+                    act[c] = 0
+                    if friction:
+                        ft[c, 0] = 0.0
+                        ft[c, 1] = 0.0
+                        ft[c, 2] = 0.0
+                    if rolling:
+                        mr[c, 0] = 0.0
+                        mr[c, 1] = 0.0
+                        mr[c, 2] = 0.0
+                continue
+            act[c] = 1
+            d = math.sqrt(d2)
+            inv = 1.0 / d
+            nx = dx * inv
+            ny = dy * inv
+            nz = dz * inv
+            delta = rs - d
+            ai = ri - 0.5 * delta
+            aj = rj - 0.5 * delta
+            # contact-point velocities: v + w x (xc - x)
+            wix, wiy, wiz = ws[i, 0], ws[i, 1], ws[i, 2]
+            wjx, wjy, wjz = ws[j, 0], ws[j, 1], ws[j, 2]
+            vx = vs[i, 0] - vs[j, 0] - ai * (wiy * nz - wiz * ny) - aj * (wjy * nz - wjz * ny)
+            vy = vs[i, 1] - vs[j, 1] - ai * (wiz * nx - wix * nz) - aj * (wjz * nx - wjx * nz)
+            vz = vs[i, 2] - vs[j, 2] - ai * (wix * ny - wiy * nx) - aj * (wjx * ny - wjy * nx)
+            mi = smass[i]
+            mj = smass[j]
+            fx, fy, fz, mx, my, mz, ed, ef = contact_law(
+                law, prm[smat[i], smat[j]], delta, nx, ny, nz, vx, vy, vz,
+                wix - wjx, wiy - wjy, wiz - wjz, ri * rj / rs, mi * mj / (mi + mj), dt,
+                ft, mr, c, friction, rolling)
+            fc[c, 0] = fx
+            fc[c, 1] = fy
+            fc[c, 2] = fz
+            if friction or rolling:
+                # torque = (xc - x) x F, xc - xi = -ai n, xc - xj = aj n
+                cx = ny * fz - nz * fy
+                cy = nz * fx - nx * fz
+                cz = nx * fy - ny * fx
+                ti[c, 0] = -ai * cx + mx
+                ti[c, 1] = -ai * cy + my
+                ti[c, 2] = -ai * cz + mz
+                tj[c, 0] = -aj * cx - mx
+                tj[c, 1] = -aj * cy - my
+                tj[c, 2] = -aj * cz - mz
+            if energy:
+                epair[c, 0] = ed
+                epair[c, 1] = ef
 
 
 @njit(inline="always")
@@ -291,8 +298,14 @@ def _gather(start, rstart, rlist, fc, ti, tj, act, epair, wstart, wwall, wfc,
             xs, vs, ws, rad, smat, smass, wkind, wpoint, wnormal, wradius, wv, wmat, prm, law, dt,
             wft, wmr, flags, fs, ts, esph,
             # fused second half kick (spheres-only scenes)
-            fuse, v, w, mass, inert, bflags, ebody, gravity, local, visc):
-    """Per-sphere sum of pair and wall forces; with ``fuse``, body loads and half kick too."""
+            fuse, v, w, mass, inert, bflags, ebody, gravity, local, visc,
+            # fused first half kick and drift of the next step
+            drift_next, x, xref, lim2, rebuild):
+    """Per-sphere sum of pair and wall forces; with ``fuse``, body loads and half kick too.
+
+    With ``drift_next`` (spheres-only, not the chunk's last step) the sphere also takes the
+    next step's first half kick and drift, the same arithmetic as :func:`_kick_drift`.
+    """
     friction = flags[F_FRICTION]
     rolling = flags[F_ROLLING]
     energy = flags[F_ENERGY]
@@ -391,6 +404,30 @@ def _gather(start, rstart, rlist, fc, ti, tj, act, epair, wstart, wwall, wfc,
                 if flags[F_PLANAR]:
                     w[i, 0] = 0.0
                     w[i, 1] = 0.0
+        if drift_next:
+            if fl & FIX_TRANSLATION == 0:
+                im = h / m
+                v[i, 0] += fx * im
+                v[i, 1] += fy * im
+                v[i, 2] += fz * im
+                if flags[F_PLANAR]:
+                    v[i, 2] = 0.0
+            x[i, 0] += v[i, 0] * dt
+            x[i, 1] += v[i, 1] * dt
+            x[i, 2] += v[i, 2] * dt
+            if torque and fl & FIX_ROTATION == 0:
+                iv = h / ii
+                w[i, 0] += tx * iv
+                w[i, 1] += ty * iv
+                w[i, 2] += tz * iv
+                if flags[F_PLANAR]:
+                    w[i, 0] = 0.0
+                    w[i, 1] = 0.0
+            ddx = x[i, 0] - xref[i, 0]
+            ddy = x[i, 1] - xref[i, 1]
+            ddz = x[i, 2] - xref[i, 2]
+            if ddx * ddx + ddy * ddy + ddz * ddz > lim2:
+                rebuild[0] = 1
 
 
 @njit(parallel=True)
@@ -449,6 +486,16 @@ def _clump_loads(mstart, mlist, xs, fs_s, ts_s, x, v, w, q, L, f, tq, mass, iner
             w[b, 0] = wx
             w[b, 1] = wy
             w[b, 2] = wz
+
+
+@njit
+def _mark_history(act, ft, mr, friction, rolling):
+    """Flag carried pairs with history as active, so the pair pass clears it if they opened."""
+    for c in range(act.shape[0]):
+        if friction and (ft[c, 0] != 0.0 or ft[c, 1] != 0.0 or ft[c, 2] != 0.0):
+            act[c] = 1
+        if rolling and (mr[c, 0] != 0.0 or mr[c, 1] != 0.0 or mr[c, 2] != 0.0):
+            act[c] = 1
 
 
 @njit
@@ -577,10 +624,13 @@ def run_steps(nsteps, time, dt, law, flags, prm, gravity, local, visc,
     ns = xs.shape[0]
     status = OK
     n = 0
+    drifted = False  # the next step's kick and drift were fused into the last gather
     while n < nsteps or prime:
         h = 0.0 if prime else dt
         if prime:
             rebuild[0] = 1
+        elif drifted:
+            drifted = False
         else:
             _kick_drift(x, v, w, q, L, f, tq, mass, inert, bflags, dt, rotate_bodies, clumps,
                         flags[F_PLANAR], xref, lim2, rebuild)
@@ -610,6 +660,7 @@ def run_steps(nsteps, time, dt, law, flags, prm, gravity, local, visc,
             ti = np.zeros((npair if friction or rolling else 0, 3))
             tj = np.zeros((npair if friction or rolling else 0, 3))
             act = np.zeros(npair, np.uint8)
+            _mark_history(act, ft, mr, friction, rolling)
             epair = np.zeros((npair if energy else 0, 2))
             if nw > 0:
                 nws, nwsph, nww = build_wall_pairs(xs, rad, skin, wkind, wpoint, wnormal, wradius)
@@ -623,7 +674,10 @@ def run_steps(nsteps, time, dt, law, flags, prm, gravity, local, visc,
                 wref[:, :] = 0.0
             xref = xs.copy()
             counters[C_REBUILD] += 1
-        _pair_forces(pi, pj, xs, vs, ws, rad, smat, smass, prm, law, h, ft, mr, friction, rolling,
+        # spheres-only: fuse the next step's kick and drift into this gather, except after the
+        # chunk's last step (the state between chunks has synchronized velocities) and the prime
+        fuse_next = not clumps and not prime and n + 1 < nsteps
+        _pair_forces(start, pj, xs, vs, ws, rad, smat, smass, prm, law, h, ft, mr, friction, rolling,
                      energy, fc, ti, tj, act, epair)
         counters[C_PAIRS] += 1
         if friction:
@@ -639,8 +693,12 @@ def run_steps(nsteps, time, dt, law, flags, prm, gravity, local, visc,
         _gather(start, rstart, rlist, fc, ti, tj, act, epair, wstart, wwall, wfc,
                 xs, vs, ws, rad, smat, smass, wkind, wpoint, wnormal, wradius, wv, wmat, prm, law, h,
                 wft, wmr, flags, fs, ts, esph,
-                not clumps, v, w, mass, inert, bflags, ebody, gravity, local, visc)
+                not clumps, v, w, mass, inert, bflags, ebody, gravity, local, visc,
+                fuse_next, x, xref, lim2, rebuild)
         counters[C_GATHER] += 1
+        if fuse_next:
+            drifted = True
+            counters[C_KICK] += 1
         if clumps:
             _clump_loads(mstart, mlist, xs, fs, ts, x, v, w, q, L, f, tq, mass, inert, bflags, flags,
                          gravity, local, visc, h, ebody)
