@@ -161,28 +161,30 @@ class System:
     def _initial_lists(self, groups):
         """Neighbour state seeded with the stored contacts (for history carry-over)."""
         ns = len(self.rad)
-        friction = self.flags[K.F_FRICTION]
-        rolling = self.flags[K.F_ROLLING]
-        c = groups.get("contacts", {})
-        ci = np.asarray(c.get("i", _EMPTY_I), np.int64)
-        cj = np.asarray(c.get("j", _EMPTY_I), np.int64)
-        order = np.lexsort((cj, ci))
-        ci, cj = ci[order], cj[order]
-        start = np.searchsorted(ci, np.arange(ns + 1)).astype(np.int64)
-        ft = np.ascontiguousarray(c["ft"][order]) if friction and "ft" in c else np.zeros((len(ci) if friction else 0, 3))
-        mr = np.ascontiguousarray(c["mr"][order]) if rolling and "mr" in c else np.zeros((len(ci) if rolling else 0, 3))
-        wc = groups.get("wall_contacts", {})
-        ws_ = np.asarray(wc.get("sphere", _EMPTY_I), np.int64)
-        ww = np.asarray(wc.get("wall", _EMPTY_I), np.int64)
-        order = np.lexsort((ww, ws_))
-        ws_, ww = ws_[order], ww[order]
-        wstart = np.searchsorted(ws_, np.arange(ns + 1)).astype(np.int64)
-        wft = np.ascontiguousarray(wc["ft"][order]) if friction and "ft" in wc else np.zeros((len(ww) if friction else 0, 3))
-        wmr = np.ascontiguousarray(wc["mr"][order]) if rolling and "mr" in wc else np.zeros((len(ww) if rolling else 0, 3))
-        return (start, np.ascontiguousarray(ci), np.ascontiguousarray(cj), np.zeros(ns + 1, np.int64), _EMPTY_I,
+        start, ci, cj, ft, mr = self._stored_history(groups.get("contacts", {}), "i", "j", ns)
+        wstart, ws_, ww, wft, wmr = self._stored_history(groups.get("wall_contacts", {}), "sphere", "wall", ns)
+        return (start, ci, cj, np.zeros(ns + 1, np.int64), _EMPTY_I,
                 ft, mr, _empty2(3), _empty2(3), _empty2(3), np.zeros(len(ci), np.uint8), _empty2(2),
-                wstart, np.ascontiguousarray(ws_), np.ascontiguousarray(ww), wft, wmr, np.zeros((len(ww), 4)),
+                wstart, ws_, ww, wft, wmr, np.zeros((len(ww), 4)),
                 self.xs.copy(), np.zeros((len(self.walls), 3)))
+
+    def _stored_history(self, group, key_a, key_b, ns):
+        """(CSR start, a, b, ft, mr) of stored contacts sorted by (a, b); history rows only for
+        the active effects."""
+        a = np.asarray(group.get(key_a, _EMPTY_I), np.int64)
+        b = np.asarray(group.get(key_b, _EMPTY_I), np.int64)
+        order = np.lexsort((b, a))
+        a, b = np.ascontiguousarray(a[order]), np.ascontiguousarray(b[order])
+        start = np.searchsorted(a, np.arange(ns + 1)).astype(np.int64)
+        hist = []
+        for name, flag in (("ft", K.F_FRICTION), ("mr", K.F_ROLLING)):
+            if not self.flags[flag]:
+                hist.append(_empty2(3))
+            elif name in group:
+                hist.append(np.ascontiguousarray(group[name][order], np.float64))
+            else:
+                hist.append(np.zeros((len(a), 3)))
+        return start, a, b, hist[0], hist[1]
 
     # ---- time stepping --------------------------------------------------------------
     def critical_dt(self):

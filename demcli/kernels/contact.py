@@ -51,6 +51,25 @@ _SQRT_5_6 = math.sqrt(5.0 / 6.0)
 
 
 @njit(inline="always")
+def _to_tangent_plane(hx, hy, hz, nx, ny, nz):
+    """A history vector turned into the current tangent plane, magnitude kept (the contact
+    frame rotated since the last step; as in LIGGGHTS/LAMMPS granular history)."""
+    h0 = hx * hx + hy * hy + hz * hz
+    if h0 > 0.0:
+        hn = hx * nx + hy * ny + hz * nz
+        hx -= hn * nx
+        hy -= hn * ny
+        hz -= hn * nz
+        h1 = hx * hx + hy * hy + hz * hz
+        if h1 > 0.0:
+            s = math.sqrt(h0 / h1)
+            hx *= s
+            hy *= s
+            hz *= s
+    return hx, hy, hz
+
+
+@njit(inline="always")
 def contact_law(law, prm, delta, nx, ny, nz, vx, vy, vz, wx, wy, wz, rstar, mstar, dt,
                 ft, mr, k, friction, rolling):
     """Force and rolling moment on i for one contact.
@@ -98,21 +117,7 @@ def contact_law(law, prm, delta, nx, ny, nz, vx, vy, vz, wx, wy, wz, rstar, msta
         vtx = vx - vn * nx
         vty = vy - vn * ny
         vtz = vz - vn * nz
-        hx = ft[k, 0]
-        hy = ft[k, 1]
-        hz = ft[k, 2]
-        h0 = hx * hx + hy * hy + hz * hz
-        if h0 > 0.0:
-            hn = hx * nx + hy * ny + hz * nz
-            hx -= hn * nx
-            hy -= hn * ny
-            hz -= hn * nz
-            h1 = hx * hx + hy * hy + hz * hz
-            if h1 > 0.0:
-                s = math.sqrt(h0 / h1)
-                hx *= s
-                hy *= s
-                hz *= s
+        hx, hy, hz = _to_tangent_plane(ft[k, 0], ft[k, 1], ft[k, 2], nx, ny, nz)
         hx -= kt * vtx * dt
         hy -= kt * vty * dt
         hz -= kt * vtz * dt
@@ -149,21 +154,7 @@ def contact_law(law, prm, delta, nx, ny, nz, vx, vy, vz, wx, wy, wz, rstar, msta
         wtz = wz - wn * nz
         mur = prm[P_MUR]
         kr = 2.25 * kn_tan * mur * mur * rstar * rstar
-        ax = mr[k, 0]
-        ay = mr[k, 1]
-        az = mr[k, 2]
-        a0 = ax * ax + ay * ay + az * az
-        if a0 > 0.0:
-            an = ax * nx + ay * ny + az * nz
-            ax -= an * nx
-            ay -= an * ny
-            az -= an * nz
-            a1 = ax * ax + ay * ay + az * az
-            if a1 > 0.0:
-                s = math.sqrt(a0 / a1)
-                ax *= s
-                ay *= s
-                az *= s
+        ax, ay, az = _to_tangent_plane(mr[k, 0], mr[k, 1], mr[k, 2], nx, ny, nz)
         ax -= kr * wtx * dt
         ay -= kr * wty * dt
         az -= kr * wtz * dt

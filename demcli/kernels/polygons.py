@@ -43,10 +43,10 @@ def graham_scan(px, py, n, hx, hy):
     """Convex hull of ``n`` points by Graham's scan (Graham 1972), as the patent states it.
 
     The lowest point (then leftmost) starts the hull; the others are sorted by polar
-    angle about it (ties: nearer first) and pushed in turn, popping the last hull point
-    while it does not make a strict left turn. px, py: (>= n,) coordinates; hx, hy:
+    angle about it (ties within 1e-12 rad: nearer first) and pushed in turn, popping the
+    last hull point while it does not make a strict left turn (also towards p0 at the end). px, py: (>= n,) coordinates; hx, hy:
     (>= n,) output, counter-clockwise. Returns the hull size h (< 3: degenerate).
-    Collinear and repeated points are dropped.
+    Collinear (to a relative 1e-12) and repeated points are dropped.
     """
     k0 = 0
     for i in range(1, n):
@@ -66,7 +66,7 @@ def graham_scan(px, py, n, hx, hy):
         a = math.atan2(dy, dx)
         d = dx * dx + dy * dy
         j = m  # insertion sort by (angle, distance); n <= a few dozen
-        while j > 0 and (ang[j - 1] > a or (ang[j - 1] == a and dist[j - 1] > d)):
+        while j > 0 and (ang[j - 1] > a + 1e-12 or (abs(ang[j - 1] - a) <= 1e-12 and dist[j - 1] > d)):
             idx[j] = idx[j - 1]
             ang[j] = ang[j - 1]
             dist[j] = dist[j - 1]
@@ -78,15 +78,26 @@ def graham_scan(px, py, n, hx, hy):
     hx[0] = x0
     hy[0] = y0
     h = 1
-    for t in range(m):
-        cx = px[idx[t]]
-        cy = py[idx[t]]
-        while h >= 2 and ((hx[h - 1] - hx[h - 2]) * (cy - hy[h - 2])
-                          - (hy[h - 1] - hy[h - 2]) * (cx - hx[h - 2])) <= 0.0:
+    for t in range(m + 1):
+        if t < m:
+            cx = px[idx[t]]
+            cy = py[idx[t]]
+        else:  # close the loop: the last hull points must turn left into p0 too
+            cx = x0
+            cy = y0
+        while h >= 2:
+            ax = hx[h - 1] - hx[h - 2]
+            ay = hy[h - 1] - hy[h - 2]
+            bx = cx - hx[h - 2]
+            by = cy - hy[h - 2]
+            # pop unless a strict left turn (relative tolerance drops round-off collinear points)
+            if ax * by - ay * bx > 1e-12 * math.sqrt((ax * ax + ay * ay) * (bx * bx + by * by)):
+                break
             h -= 1
-        hx[h] = cx
-        hy[h] = cy
-        h += 1
+        if t < m:
+            hx[h] = cx
+            hy[h] = cy
+            h += 1
     return h
 
 
@@ -302,7 +313,7 @@ def place_polygons(rng, kind, sa, sb, r_lo, r_hi, target, order, m_lo, m_hi, del
         while tgt - placed[c] > tol:
             rest = tgt - placed[c]
             h, area = draw_shape(rng, m_lo, m_hi, delta, rlo, rhi, px, py, hx, hy)
-            if not (area <= rest and _feasible(rest - area, tol, a_lo, a_hi)):
+            if area > rest:
                 # finish the class: scale this shape to rest / k
                 k_min = max(1, int(math.ceil(rest / a_hi)))
                 k_max = int(math.floor(rest / a_lo))

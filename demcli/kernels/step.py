@@ -41,6 +41,40 @@ from demcli.kernels.layout import (C_BODY, C_CHECK, C_DAMPING, C_ENERGY, C_FRICT
                                    FIX_TRANSLATION, OK, BAD_NUMBER, BAD_OVERLAP, BAD_ENERGY)
 
 
+@njit(inline="always")
+def _kick_v(v, i, fx, fy, fz, im, planar):
+    """v_i += F im (im = dt / 2m); planar mode keeps v_z = 0."""
+    v[i, 0] += fx * im
+    v[i, 1] += fy * im
+    v[i, 2] += fz * im
+    if planar:
+        v[i, 2] = 0.0
+
+
+@njit(inline="always")
+def _kick_w(w, i, tx, ty, tz, iv, planar):
+    """omega_i += T iv (iv = dt / 2I, isotropic inertia); planar mode keeps only omega_z."""
+    w[i, 0] += tx * iv
+    w[i, 1] += ty * iv
+    w[i, 2] += tz * iv
+    if planar:
+        w[i, 0] = 0.0
+        w[i, 1] = 0.0
+
+
+@njit(inline="always")
+def _drift(x, v, i, dt, xref, lim2, rebuild):
+    """x_i += v_i dt; flags a list rebuild once x_i is more than skin/2 from where it was listed."""
+    x[i, 0] += v[i, 0] * dt
+    x[i, 1] += v[i, 1] * dt
+    x[i, 2] += v[i, 2] * dt
+    dx = x[i, 0] - xref[i, 0]
+    dy = x[i, 1] - xref[i, 1]
+    dz = x[i, 2] - xref[i, 2]
+    if dx * dx + dy * dy + dz * dz > lim2:
+        rebuild[0] = 1
+
+
 @njit(parallel=True)
 def _kick_drift(x, v, w, q, L, f, tq, mass, inert, bflags, dt, rotate_bodies, clumps, planar,
                 xref, lim2, rebuild):
@@ -49,32 +83,18 @@ def _kick_drift(x, v, w, q, L, f, tq, mass, inert, bflags, dt, rotate_bodies, cl
     for b in prange(x.shape[0]):
         fl = bflags[b]
         if fl & FIX_TRANSLATION == 0:
-            im = h / mass[b]
-            v[b, 0] += f[b, 0] * im
-            v[b, 1] += f[b, 1] * im
-            v[b, 2] += f[b, 2] * im
-            if planar:
-                v[b, 2] = 0.0
-        x[b, 0] += v[b, 0] * dt
-        x[b, 1] += v[b, 1] * dt
-        x[b, 2] += v[b, 2] * dt
+            _kick_v(v, b, f[b, 0], f[b, 1], f[b, 2], h / mass[b], planar)
         if rotate_bodies and fl & FIX_ROTATION == 0:
             if clumps:
                 _rotate_rigid(b, w, q, L, tq, inert, dt, planar)
             else:
-                ii = h / inert[b, 0]
-                w[b, 0] += tq[b, 0] * ii
-                w[b, 1] += tq[b, 1] * ii
-                w[b, 2] += tq[b, 2] * ii
-                if planar:
-                    w[b, 0] = 0.0
-                    w[b, 1] = 0.0
-        if not clumps:
-            dx = x[b, 0] - xref[b, 0]
-            dy = x[b, 1] - xref[b, 1]
-            dz = x[b, 2] - xref[b, 2]
-            if dx * dx + dy * dy + dz * dz > lim2:
-                rebuild[0] = 1
+                _kick_w(w, b, tq[b, 0], tq[b, 1], tq[b, 2], h / inert[b, 0], planar)
+        if clumps:  # members are checked when placed
+            x[b, 0] += v[b, 0] * dt
+            x[b, 1] += v[b, 1] * dt
+            x[b, 2] += v[b, 2] * dt
+        else:
+            _drift(x, v, b, dt, xref, lim2, rebuild)
 
 
 @njit(inline="always")
@@ -385,49 +405,23 @@ def _gather(start, rstart, rlist, fc, ti, tj, act, epair, wstart, wwall, wfc,
         fs[i, 0] = fx
         fs[i, 1] = fy
         fs[i, 2] = fz
+        planar = flags[F_PLANAR]
+        im = h / m
+        iv = h / ii
         if fl & FIX_TRANSLATION == 0:
-            im = h / m
-            v[i, 0] += fx * im
-            v[i, 1] += fy * im
-            v[i, 2] += fz * im
-            if flags[F_PLANAR]:
-                v[i, 2] = 0.0
+            _kick_v(v, i, fx, fy, fz, im, planar)
         if torque:
             ts[i, 0] = tx
             ts[i, 1] = ty
             ts[i, 2] = tz
             if fl & FIX_ROTATION == 0:
-                iv = h / ii
-                w[i, 0] += tx * iv
-                w[i, 1] += ty * iv
-                w[i, 2] += tz * iv
-                if flags[F_PLANAR]:
-                    w[i, 0] = 0.0
-                    w[i, 1] = 0.0
+                _kick_w(w, i, tx, ty, tz, iv, planar)
         if drift_next:
             if fl & FIX_TRANSLATION == 0:
-                im = h / m
-                v[i, 0] += fx * im
-                v[i, 1] += fy * im
-                v[i, 2] += fz * im
-                if flags[F_PLANAR]:
-                    v[i, 2] = 0.0
-            x[i, 0] += v[i, 0] * dt
-            x[i, 1] += v[i, 1] * dt
-            x[i, 2] += v[i, 2] * dt
+                _kick_v(v, i, fx, fy, fz, im, planar)
             if torque and fl & FIX_ROTATION == 0:
-                iv = h / ii
-                w[i, 0] += tx * iv
-                w[i, 1] += ty * iv
-                w[i, 2] += tz * iv
-                if flags[F_PLANAR]:
-                    w[i, 0] = 0.0
-                    w[i, 1] = 0.0
-            ddx = x[i, 0] - xref[i, 0]
-            ddy = x[i, 1] - xref[i, 1]
-            ddz = x[i, 2] - xref[i, 2]
-            if ddx * ddx + ddy * ddy + ddz * ddz > lim2:
-                rebuild[0] = 1
+                _kick_w(w, i, tx, ty, tz, iv, planar)
+            _drift(x, v, i, dt, xref, lim2, rebuild)
 
 
 @njit(parallel=True)
@@ -468,12 +462,7 @@ def _clump_loads(mstart, mlist, xs, fs_s, ts_s, x, v, w, q, L, f, tq, mass, iner
         tq[b, 2] = tz
         fl = bflags[b]
         if fl & FIX_TRANSLATION == 0:
-            im = h / m
-            v[b, 0] += fx * im
-            v[b, 1] += fy * im
-            v[b, 2] += fz * im
-            if flags[F_PLANAR]:
-                v[b, 2] = 0.0
+            _kick_v(v, b, fx, fy, fz, h / m, flags[F_PLANAR])
         if fl & FIX_ROTATION == 0:
             L[b, 0] += h * tx
             L[b, 1] += h * ty
