@@ -169,3 +169,14 @@ def test_load_case_reads_overrides_and_validates(tmp_path):
     node = load_case(path, SCHEMA, overrides=["stages.shake.steps=20"])
     assert node.stages[1].steps == 20
     assert node.stages[0].line_of("steps") == 4
+
+
+def test_case_reference_doc_is_current():
+    # Given the schema-generated case reference
+    from pathlib import Path
+
+    from demcli.config.docs import cases_markdown
+
+    doc = Path(__file__).resolve().parents[2] / "docs" / "cases.md"
+    # Then docs/cases.md matches it (regenerate with python -m demcli.config.docs)
+    assert doc.read_text() == cases_markdown()
