@@ -426,6 +426,7 @@ def main(argv=None):
                 run_entry(e, k)
 
     sieve = None if a.no_sieve else run_sieve(a.quick)
+    subprocess.run([sys.executable, os.path.join(HERE, "bench_polygons.py")] + ["--quick"] * a.quick, cwd=ROOT)
     load1 = load()
     digest1 = source_digest()
     git1 = sh("git -C " + shlex.quote(ROOT) + " rev-parse --short HEAD") or "?"

@@ -35,23 +35,17 @@ def describe_case(path, overrides=()):
     from demcli.config.case import load_case
     from demcli.engine.materials import critical_time_step, pair_table
     from demcli.stages import dem
+    from demcli.stages.base import STAGE_TYPES
 
     case = load_case(path, overrides)
     lines = [f"case {path}: valid; {len(case.stages)} stages, dimension {case.dimension}, seed {case.seed}",
              "materials: " + ", ".join(case.materials)]
     for k, cfg in enumerate(case.stages):
         lines.append(f"\n[{k:02d}] {cfg.name} ({cfg.type})")
+        st_type = STAGE_TYPES[cfg.type]
+        if st_type.describe is not None:
+            lines += ["  " + line for line in st_type.describe(cfg, case).splitlines()]
         if cfg.type != "dem":
-            if cfg.type == "gradation":
-                from demcli.stages.gradation import TOTALS, compute
-
-                res = compute(cfg)
-                unit = "m^2" if res["dim"] == 2 else "m^3"
-                lines.append(f"  {len(res['class_share'])} classes ({cfg.volumetrics.kind}); "
-                             + ", ".join(f"{k} {v:.4g} {unit}" for k, v in zip(TOTALS, res["totals"])))
-            if cfg.type == "generate":
-                lines.append(f"  {cfg.count} particles, radius {cfg.radius.min:g}-{cfg.radius.max:g} m, "
-                             f"{cfg.placement} placement, material {cfg.material}")
             continue
         scene = _scene_estimate(case, k)
         plan = dem.plan_summary(case, cfg, {"clumps": bool(scene and scene[3])})

@@ -21,7 +21,7 @@ def cli():
 @click.option("--set", "overrides", multiple=True, metavar="PATH=VALUE",
               help="Override a case value, e.g. --set stages.settle.time.duration=0.1s")
 @click.option("--out", type=click.Path(file_okay=False), help="Run folder (default runs/<case name>).")
-@click.option("--threads", type=click.IntRange(min=1), help="Threads for the kernels (default: all cores).")
+@click.option("--threads", type=click.IntRange(min=1), help="Threads for the kernels (default: the cores not busy with other work).")
 @click.option("--quiet", is_flag=True, help="No progress or log lines.")
 @click.option("--resume", is_flag=True, help="Continue interrupted stages from their checkpoints.")
 def run(case, from_stage, only, force, overrides, out, threads, quiet, resume):

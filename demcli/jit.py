@@ -6,6 +6,7 @@ is installed, which scales poorly for these loops). ``NUMBA_DISABLE_JIT=1`` runs
 kernels as Python for coverage.
 """
 
+import math
 import os
 
 import numba
@@ -25,10 +26,24 @@ def njit(*args, parallel=False, inline="never", **kwargs):
     return numba.njit(*args, **opts)
 
 
+def free_cores():
+    """Cores not busy with other work, from the 1-minute load average (at least 1).
+
+    OpenMP threads spin at every barrier; a thread whose core is taken by another process
+    stalls all the others, so asking for more threads than free cores can be 10 times
+    slower than one thread. Results do not depend on the thread count.
+    """
+    cores = numba.config.NUMBA_NUM_THREADS
+    try:
+        load = os.getloadavg()[0]
+    except OSError:
+        return cores
+    return max(1, min(cores, int(math.floor(cores - load + 0.5))))
+
+
 def set_threads(n):
-    """Set the number of threads used by parallel kernels (``None``: all cores)."""
-    if n is None:
-        return numba.config.NUMBA_NUM_THREADS
-    n = max(1, min(int(n), numba.config.NUMBA_NUM_THREADS))
+    """Set the number of threads used by parallel kernels (``None``: the free cores)."""
+    n = free_cores() if n is None else int(n)
+    n = max(1, min(n, numba.config.NUMBA_NUM_THREADS))
     numba.set_num_threads(n)
     return n

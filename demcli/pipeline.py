@@ -171,6 +171,7 @@ class Runner:
         self._shared = {k: self.case[k] for k in ("seed", "dimension", "thickness")}
         self._shared["materials"] = self.case.materials.to_dict()
         self._logfile = None
+        self.threads = 1
 
     def log(self, message):
         line = f"{_time.strftime('%H:%M:%S')} {message}"
@@ -217,7 +218,7 @@ class Runner:
         self._logfile = open(self.run_dir / "log.txt", "a", encoding="utf-8")
         results = []
         try:
-            self.log(f"case {self.case_path} -> {self.run_dir}")
+            self.log(f"case {self.case_path} -> {self.run_dir} ({self.threads} thread{'s' if self.threads > 1 else ''})")
             state_in, in_path = None, None
             for k, cfg in enumerate(stages):
                 out_path = self.output_path(k)
@@ -291,5 +292,6 @@ def run_case(case, out=None, from_stage=None, only=None, force=False, overrides=
     from demcli.jit import set_threads
 
     runner = Runner(case, overrides=overrides, out=out, quiet=quiet, resume=resume)
-    set_threads(threads)
+    used = set_threads(threads)
+    runner.threads = used
     return runner.run(from_stage=from_stage, only=only, force=force)

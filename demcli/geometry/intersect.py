@@ -83,6 +83,29 @@ def separation(a, b):
     return float(gap[k]), axis
 
 
+def separated(a, b, gap=0.0, hints=None):
+    """True when some separating-axis candidate shows the two bodies at least ``gap`` (m) apart.
+
+    Same answer as ``separation(a, b)[0] >= gap`` but faster on separated pairs: the
+    ``hints`` (unit axes (k, 3), e.g. the vertical for bodies stacked on each other; any
+    axis that shows a gap proves separation) and the face normals are tried first, the
+    edge-edge axes only when they fail.
+    """
+    a, b = as_convex(a), as_convex(b)
+    first = np.concatenate([a.normals, b.normals] if hints is None else [np.atleast_2d(hints), a.normals, b.normals])
+    for axes in (first, None):
+        if axes is None:
+            cross = np.cross(a.directions[:, None, :], b.directions[None, :, :]).reshape(-1, 3)
+            norm = np.linalg.norm(cross, axis=1)
+            keep = norm > _PARALLEL
+            axes = cross[keep] / norm[keep][:, None]
+        pa = a.vertices @ axes.T
+        pb = b.vertices @ axes.T
+        if np.any(np.maximum(pb.min(axis=0) - pa.max(axis=0), pa.min(axis=0) - pb.max(axis=0)) >= gap):
+            return True
+    return False
+
+
 def intersect(a, b, tol=0.0):
     """True when the interiors of two convex polyhedra overlap by more than ``tol`` (m).
 
@@ -93,4 +116,4 @@ def intersect(a, b, tol=0.0):
     return separation(a, b)[0] < -tol
 
 
-__all__ = ["Convex", "as_convex", "candidate_axes", "intersect", "separation", "transform"]
+__all__ = ["Convex", "as_convex", "candidate_axes", "intersect", "separated", "separation", "transform"]

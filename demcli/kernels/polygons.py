@@ -44,9 +44,10 @@ def graham_scan(px, py, n, hx, hy):
 
     The lowest point (then leftmost) starts the hull; the others are sorted by polar
     angle about it (ties within 1e-12 rad: nearer first) and pushed in turn, popping the
-    last hull point while it does not make a strict left turn (also towards p0 at the end). px, py: (>= n,) coordinates; hx, hy:
-    (>= n,) output, counter-clockwise. Returns the hull size h (< 3: degenerate).
-    Collinear (to a relative 1e-12) and repeated points are dropped.
+    last hull point while it does not make a strict left turn (also towards p0 at the
+    end). px, py: (>= n,) coordinates; hx, hy: (>= n,) output, counter-clockwise.
+    Returns the hull size h (< 3: degenerate). Collinear (to a relative 1e-12) and
+    repeated points are dropped.
     """
     k0 = 0
     for i in range(1, n):
@@ -66,7 +67,8 @@ def graham_scan(px, py, n, hx, hy):
         a = math.atan2(dy, dx)
         d = dx * dx + dy * dy
         j = m  # insertion sort by (angle, distance); n <= a few dozen
-        while j > 0 and (ang[j - 1] > a + 1e-12 or (abs(ang[j - 1] - a) <= 1e-12 and dist[j - 1] > d)):
+        while j > 0 and (ang[j - 1] > a + 1e-12
+                         or (abs(ang[j - 1] - a) <= 1e-12 and dist[j - 1] > d)):
             idx[j] = idx[j - 1]
             ang[j] = ang[j - 1]
             dist[j] = dist[j - 1]
@@ -313,7 +315,7 @@ def place_polygons(rng, kind, sa, sb, r_lo, r_hi, target, order, m_lo, m_hi, del
         while tgt - placed[c] > tol:
             rest = tgt - placed[c]
             h, area = draw_shape(rng, m_lo, m_hi, delta, rlo, rhi, px, py, hx, hy)
-            if area > rest:
+            if not (area <= rest and _feasible(rest - area, tol, a_lo, a_hi)):
                 # finish the class: scale this shape to rest / k
                 k_min = max(1, int(math.ceil(rest / a_hi)))
                 k_max = int(math.floor(rest / a_lo))

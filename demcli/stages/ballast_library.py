@@ -221,22 +221,29 @@ def build_library(gen, workers=1, log=None):
     tasks = _chunks(gen)
     t0 = time.perf_counter()
     n_total = gen["per_class"] * len(gen["classes"])
+    results = []
+    next_log = t0 + 10.0
+
+    def progress():
+        nonlocal next_log
+        if log is not None and time.perf_counter() > next_log:
+            done = sum(len(r[0]) for r in results)
+            rate = done / (time.perf_counter() - t0)
+            log(f"  {done}/{n_total} particles, {rate:.0f}/s, ETA {(n_total - done) / rate:.0f} s")
+            next_log += 10.0
+
     if workers > 1 and len(tasks) > 1:
         import multiprocessing
         from concurrent.futures import ProcessPoolExecutor
 
         with ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn")) as pool:
-            results = list(pool.map(build_chunk, tasks))
+            for res in pool.map(build_chunk, tasks):  # in task order
+                results.append(res)
+                progress()
     else:
-        results = []
-        next_log = t0 + 10.0
         for task in tasks:
             results.append(build_chunk(task))
-            if log is not None and time.perf_counter() > next_log:
-                done = sum(len(r[0]) for r in results)
-                rate = done / (time.perf_counter() - t0)
-                log(f"  {done}/{n_total} particles, {rate:.0f}/s, ETA {(n_total - done) / rate:.0f} s")
-                next_log += 10.0
+            progress()
     seconds = time.perf_counter() - t0
     table = ShapeTable.concat([r[0] for r in results])
     particles = {name: np.concatenate([r[1][name] for r in results]) for name in results[0][1]}

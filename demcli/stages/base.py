@@ -4,7 +4,7 @@ A stage type module calls :func:`register_stage` at import; the case schema is b
 from the registry, so a new stage is one new module and nothing else changes.
 """
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 STAGE_TYPES = {}
 
@@ -22,6 +22,7 @@ class StageType:
         plan: optional ``plan(cfg, case) -> Plan`` for ``demcli check``.
         check: optional cross-field rule ``check(node, report)``.
         doc: one-line description.
+        describe: optional ``describe(cfg, case) -> str`` summary for ``demcli check``.
     """
 
     name: str
@@ -32,7 +33,7 @@ class StageType:
     plan: object = None
     check: object = None
     doc: str = ""
-    describe: object = field(default=None)
+    describe: object = None
 
 
 def register_stage(stage_type):
@@ -45,5 +46,7 @@ def register_stage(stage_type):
 def load_stage_types():
     """Import every built-in stage module (registers them) and return the registry."""
     from demcli.stages import dem, generate, gradation  # noqa: F401
+    from demcli.stages import assemble, ballast_library  # noqa: F401
+    from demcli.stages import discretize, polygons  # noqa: F401  (2D sections, seed 001)
 
     return STAGE_TYPES

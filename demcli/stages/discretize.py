@@ -42,8 +42,8 @@ register_group("section", "Phases of a discretized 2D section (seed 001)", write
 for _name, _kind, _dims, _unit, _doc in [
         ("body_polygon", "i", ("n_b",), "", "polygon of each body (index into polygons/*), -1 for mastic"),
         ("void_centres", "f", ("n_void", 2), "m", "centres of the deleted mastic balls (the air voids)"),
-        ("areas", "f", (6,), "m^2", "specimen S, polygons, aggregate balls, mastic balls, voids, target voids "
-                                    "S VV (balls counted by void_ball_area)"),
+        ("areas", "f", (6,), "m^2", "specimen S, polygons, aggregate balls x cell, mastic balls x cell, "
+                                    "deleted balls x void_ball_area, target voids S VV (cell = 2 sqrt(3) r^2)"),
         ("ball_radius", "f", (), "m", "radius of the lattice balls")]:
     register(Field(f"section/{_name}", _kind, _dims, _unit, _doc, writer="stage discretize"))
 
@@ -132,7 +132,6 @@ def run(ctx, cfg, state_in):
     m_b = mass[has]
     mom_b[single] = (0.5 * m_b[single] * r * r)[:, None]  # single disks: the generate stage's convention
     ang_b = np.where(single, 0.0, angle[has])
-    off = np.where((count[label[agg]] == 1)[:, None], 0.0, off)
 
     # mastic and voids
     mastic = np.flatnonzero(label < 0)

@@ -215,5 +215,13 @@ def _empty_spheres():
             "material": np.zeros(0, np.int64)}
 
 
-register_stage(StageType("gradation", FIELDS, run, needs_input=False, check=_check,
+def describe(cfg, case):
+    """One line for ``demcli check``: classes and totals."""
+    res = compute(cfg)
+    unit = "m^2" if res["dim"] == 2 else "m^3"
+    return (f"{len(res['class_share'])} classes ({cfg.volumetrics.kind}); "
+            + ", ".join(f"{k} {v:.4g} {unit}" for k, v in zip(TOTALS, res["totals"])))
+
+
+register_stage(StageType("gradation", FIELDS, run, needs_input=False, check=_check, describe=describe,
                          doc="sieve table, size classes and their target volumes or areas"))
