@@ -164,7 +164,7 @@ class System:
         start, ci, cj, ft, mr = self._stored_history(groups.get("contacts", {}), "i", "j", ns)
         wstart, ws_, ww, wft, wmr = self._stored_history(groups.get("wall_contacts", {}), "sphere", "wall", ns)
         return (start, ci, cj, np.zeros(ns + 1, np.int64), _EMPTY_I,
-                ft, mr, _empty2(3), _empty2(3), _empty2(3), np.zeros(len(ci), np.uint8), _empty2(2),
+                ft, mr, _empty2(3), _empty2(3), np.zeros(len(ci), np.uint8), _empty2(2),
                 wstart, ws_, ww, wft, wmr, np.zeros((len(ww), 4)),
                 self.xs.copy(), np.zeros((len(self.walls), 3)))
 
@@ -233,9 +233,9 @@ class System:
         nl = self.nl
         w = self.walls
         return float(total_strain_energy(
-            nl[1], nl[2], self.xs, self.rad, self.smat, self.prm, self.law, nl[5], nl[6],
-            self.flags[K.F_FRICTION], self.flags[K.F_ROLLING], nl[12], nl[14], w.kind, self.wpoint,
-            w.normal, w.radius, w.material, nl[15], nl[16]))
+            nl[K.NL_PI], nl[K.NL_PJ], self.xs, self.rad, self.smat, self.prm, self.law, nl[K.NL_FT], nl[K.NL_MR],
+            self.flags[K.F_FRICTION], self.flags[K.F_ROLLING], nl[K.NL_WSTART], nl[K.NL_WWALL], w.kind, self.wpoint,
+            w.normal, w.radius, w.material, nl[K.NL_WFT], nl[K.NL_WMR]))
 
     def losses(self):
         """Cumulative energy [J]: contact dashpots, slip, body damping, and work done by walls."""
@@ -259,8 +259,8 @@ class System:
     def contact_count(self):
         """(sphere-sphere contacts, sphere-wall contacts) touching now."""
         nl = self.nl
-        n_pp = int(nl[10].sum())
-        wfc = nl[17]
+        n_pp = int(nl[K.NL_ACT].sum())
+        wfc = nl[K.NL_WFC]
         n_pw = int(np.count_nonzero(np.any(wfc[:, :3] != 0.0, axis=1))) if len(wfc) else 0
         return n_pp, n_pw
 
@@ -284,19 +284,19 @@ class System:
     def groups(self):
         """State groups of the current scene (bodies, spheres, contacts, walls, energy)."""
         nl = self.nl
-        act = nl[10].astype(bool)
-        contacts = {"i": nl[1][act].copy(), "j": nl[2][act].copy(), "force": nl[7][act].copy()}
+        act = nl[K.NL_ACT].astype(bool)
+        contacts = {"i": nl[K.NL_PI][act].copy(), "j": nl[K.NL_PJ][act].copy(), "force": nl[K.NL_FC][act].copy()}
         if self.flags[K.F_FRICTION]:
-            contacts["ft"] = nl[5][act].copy()
+            contacts["ft"] = nl[K.NL_FT][act].copy()
         if self.flags[K.F_ROLLING]:
-            contacts["mr"] = nl[6][act].copy()
-        wfc = nl[17]
+            contacts["mr"] = nl[K.NL_MR][act].copy()
+        wfc = nl[K.NL_WFC]
         wact = np.any(wfc[:, :3] != 0.0, axis=1) if len(wfc) else np.zeros(0, bool)
-        wall_contacts = {"sphere": nl[13][wact].copy(), "wall": nl[14][wact].copy(), "force": wfc[wact, :3].copy()}
+        wall_contacts = {"sphere": nl[K.NL_WSPH][wact].copy(), "wall": nl[K.NL_WWALL][wact].copy(), "force": wfc[wact, :3].copy()}
         if self.flags[K.F_FRICTION]:
-            wall_contacts["ft"] = nl[15][wact].copy()
+            wall_contacts["ft"] = nl[K.NL_WFT][wact].copy()
         if self.flags[K.F_ROLLING]:
-            wall_contacts["mr"] = nl[16][wact].copy()
+            wall_contacts["mr"] = nl[K.NL_WMR][wact].copy()
         bodies = {"x": self.x.copy(), "v": self.v.copy(), "q": self.q.copy(), "omega": self.w.copy(),
                   "mass": self.mass.copy(), "inertia": self.inert.copy(), "id": self.body_id.copy(),
                   "flags": self.bflags.copy(), "force": self.f.copy(), "torque": self.tq.copy()}

@@ -19,3 +19,9 @@ STATUS_TEXT = {OK: "ok", BAD_NUMBER: "NaN or Inf in the body state", BAD_OVERLAP
 # body flag bits
 FIX_TRANSLATION = 1
 FIX_ROTATION = 2
+
+# positions in the neighbour-state tuple ``nl`` of :func:`demcli.kernels.step.run_steps`
+NL_FIELDS = ("start", "pi", "pj", "rstart", "rlist", "ft", "mr", "fc", "tj", "act", "epair",
+             "wstart", "wsph", "wwall", "wft", "wmr", "wfc", "xref", "wref")
+(NL_START, NL_PI, NL_PJ, NL_RSTART, NL_RLIST, NL_FT, NL_MR, NL_FC, NL_TJ, NL_ACT, NL_EPAIR,
+ NL_WSTART, NL_WSPH, NL_WWALL, NL_WFT, NL_WMR, NL_WFC, NL_XREF, NL_WREF) = range(len(NL_FIELDS))

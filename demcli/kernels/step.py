@@ -157,16 +157,26 @@ def _place_members(x, v, w, q, xs, vs, ws, sbody, soff, xref, lim2, rebuild):
 
 @njit(parallel=True)
 def _pair_forces(start, pj, xs, vs, ws, rad, smat, smass, prm, law, dt, ft, mr, friction, rolling,
-                 energy, fc, ti, tj, act, epair):
+                 energy, fc, tj, act, epair, frow, trow, erow):
     """Force, torques and dissipation of every listed pair, each pair writing its own row.
 
-    Walks the CSR rows (sphere i, then its j > i), so i's data is loaded once per row.
+    Walks the CSR rows (sphere i, then its j > i), so i's data is loaded once per row, and
+    the row's owner sums i's side of its pairs into frow/trow/erow[i] (race-free); the
+    gather then adds only the j sides.
     """
     for i in prange(start.shape[0] - 1):
         xi0 = xs[i, 0]
         xi1 = xs[i, 1]
         xi2 = xs[i, 2]
         ri = rad[i]
+        sfx = 0.0
+        sfy = 0.0
+        sfz = 0.0
+        stx = 0.0
+        sty = 0.0
+        stz = 0.0
+        se0 = 0.0
+        se1 = 0.0
         for c in range(start[i], start[i + 1]):
             j = pj[c]
             dx = xi0 - xs[j, 0]
@@ -211,20 +221,35 @@ def _pair_forces(start, pj, xs, vs, ws, rad, smat, smass, prm, law, dt, ft, mr, 
             fc[c, 0] = fx
             fc[c, 1] = fy
             fc[c, 2] = fz
+            sfx += fx
+            sfy += fy
+            sfz += fz
             if friction or rolling:
                 # torque = (xc - x) x F, xc - xi = -ai n, xc - xj = aj n
                 cx = ny * fz - nz * fy
                 cy = nz * fx - nx * fz
                 cz = nx * fy - ny * fx
-                ti[c, 0] = -ai * cx + mx
-                ti[c, 1] = -ai * cy + my
-                ti[c, 2] = -ai * cz + mz
+                stx += -ai * cx + mx
+                sty += -ai * cy + my
+                stz += -ai * cz + mz
                 tj[c, 0] = -aj * cx - mx
                 tj[c, 1] = -aj * cy - my
                 tj[c, 2] = -aj * cz - mz
             if energy:
                 epair[c, 0] = ed
                 epair[c, 1] = ef
+                se0 += ed
+                se1 += ef
+        frow[i, 0] = sfx
+        frow[i, 1] = sfy
+        frow[i, 2] = sfz
+        if friction or rolling:
+            trow[i, 0] = stx
+            trow[i, 1] = sty
+            trow[i, 2] = stz
+        if energy:
+            erow[i, 0] = se0
+            erow[i, 1] = se1
 
 
 @njit(inline="always")
@@ -314,7 +339,7 @@ def _body_loads(fx, fy, fz, tx, ty, tz, m, ii, vx, vy, vz, wx, wy, wz, gravity, 
 
 
 @njit(parallel=True)
-def _gather(start, rstart, rlist, fc, ti, tj, act, epair, wstart, wwall, wfc,
+def _gather(frow, trow, erow, rstart, rlist, fc, tj, act, epair, wstart, wwall, wfc,
             xs, vs, ws, rad, smat, smass, wkind, wpoint, wnormal, wradius, wv, wmat, prm, law, dt,
             wft, wmr, flags, fs, ts, esph,
             # fused second half kick (spheres-only scenes)
@@ -332,26 +357,22 @@ def _gather(start, rstart, rlist, fc, ti, tj, act, epair, wstart, wwall, wfc,
     torque = friction or rolling
     h = 0.5 * dt
     for i in prange(xs.shape[0]):
-        fx = 0.0
-        fy = 0.0
-        fz = 0.0
+        # i's side of its own row, summed by the pair pass in the same order
+        fx = frow[i, 0]
+        fy = frow[i, 1]
+        fz = frow[i, 2]
         tx = 0.0
         ty = 0.0
         tz = 0.0
         e0 = 0.0
         e1 = 0.0
-        for c in range(start[i], start[i + 1]):
-            if act[c]:
-                fx += fc[c, 0]
-                fy += fc[c, 1]
-                fz += fc[c, 2]
-                if torque:
-                    tx += ti[c, 0]
-                    ty += ti[c, 1]
-                    tz += ti[c, 2]
-                if energy:
-                    e0 += epair[c, 0]
-                    e1 += epair[c, 1]
+        if torque:
+            tx = trow[i, 0]
+            ty = trow[i, 1]
+            tz = trow[i, 2]
+        if energy:
+            e0 = erow[i, 0]
+            e1 = erow[i, 1]
         for a in range(rstart[i], rstart[i + 1]):
             c = rlist[a]
             if act[c]:
@@ -584,7 +605,7 @@ def run_steps(nsteps, time, dt, law, flags, prm, gravity, local, visc,
         bodies: (x, v, w, q, L, f, tq) float64 arrays, (n_b, 3) or (n_b, 4) for q.
         spheres: (xs, vs, ws, fs, ts) float64 (n_s, 3); the body arrays themselves for
             spheres-only scenes.
-        nl: neighbour state (start, pi, pj, rstart, rlist, ft, mr, fc, ti, tj, act, epair,
+        nl: neighbour state (start, pi, pj, rstart, rlist, ft, mr, fc, tj, act, epair,
             wstart, wsph, wwall, wft, wmr, wfc, xref, wref); rebuilt here when needed.
         esph: (n_s, 2) cumulative contact damping and friction losses [J];
         ebody: (n_b,) cumulative body damping losses [J]; eacc: (1,) wall work [J].
@@ -599,7 +620,7 @@ def run_steps(nsteps, time, dt, law, flags, prm, gravity, local, visc,
     """
     x, v, w, q, L, f, tq = bodies
     xs, vs, ws, fs, ts = spheres
-    (start, pi, pj, rstart, rlist, ft, mr, fc, ti, tj, act, epair,
+    (start, pi, pj, rstart, rlist, ft, mr, fc, tj, act, epair,
      wstart, wsph, wwall, wft, wmr, wfc, xref, wref) = nl
     clumps = flags[F_CLUMPS]
     friction = flags[F_FRICTION]
@@ -611,6 +632,10 @@ def run_steps(nsteps, time, dt, law, flags, prm, gravity, local, visc,
     rebuild[0] = 1 if force_rebuild else 0
     nw = wv.shape[0]
     ns = xs.shape[0]
+    # per-sphere sums of each sphere's own pair row (race-free: the row owner writes them)
+    frow = np.zeros((ns, 3))
+    trow = np.zeros((ns if friction or rolling else 0, 3))
+    erow = np.zeros((ns if energy else 0, 2))
     status = OK
     n = 0
     drifted = False  # the next step's kick and drift were fused into the last gather
@@ -646,7 +671,6 @@ def run_steps(nsteps, time, dt, law, flags, prm, gravity, local, visc,
             start, pi, pj, ft, mr = nstart, npi, npj, nft, nmr
             rstart, rlist = build_reverse(ns, pj)
             fc = np.empty((npair, 3))
-            ti = np.zeros((npair if friction or rolling else 0, 3))
             tj = np.zeros((npair if friction or rolling else 0, 3))
             act = np.zeros(npair, np.uint8)
             _mark_history(act, ft, mr, friction, rolling)
@@ -667,7 +691,7 @@ def run_steps(nsteps, time, dt, law, flags, prm, gravity, local, visc,
         # chunk's last step (the state between chunks has synchronized velocities) and the prime
         fuse_next = not clumps and not prime and n + 1 < nsteps
         _pair_forces(start, pj, xs, vs, ws, rad, smat, smass, prm, law, h, ft, mr, friction, rolling,
-                     energy, fc, ti, tj, act, epair)
+                     energy, fc, tj, act, epair, frow, trow, erow)
         counters[C_PAIRS] += 1
         if friction:
             counters[C_FRICTION] += 1
@@ -679,7 +703,7 @@ def run_steps(nsteps, time, dt, law, flags, prm, gravity, local, visc,
             counters[C_GRAVITY] += 1
         if flags[F_LOCAL] or flags[F_VISCOUS]:
             counters[C_DAMPING] += 1
-        _gather(start, rstart, rlist, fc, ti, tj, act, epair, wstart, wwall, wfc,
+        _gather(frow, trow, erow, rstart, rlist, fc, tj, act, epair, wstart, wwall, wfc,
                 xs, vs, ws, rad, smat, smass, wkind, wpoint, wnormal, wradius, wv, wmat, prm, law, h,
                 wft, wmr, flags, fs, ts, esph,
                 not clumps, v, w, mass, inert, bflags, ebody, gravity, local, visc,
@@ -707,7 +731,7 @@ def run_steps(nsteps, time, dt, law, flags, prm, gravity, local, visc,
             counters[C_CHECK] += 1
             if status != OK:
                 break
-    nl = (start, pi, pj, rstart, rlist, ft, mr, fc, ti, tj, act, epair,
+    nl = (start, pi, pj, rstart, rlist, ft, mr, fc, tj, act, epair,
           wstart, wsph, wwall, wft, wmr, wfc, xref, wref)
     return status, n, time, nl
 
