@@ -9,6 +9,7 @@ asked for, are started inside the timed region (their start-up is part of the co
 The last line is ``library_particles_per_s=<number>``.
 
 Usage: python bench/bench_library.py [n_particles] [workers]   (defaults 10000, 2)
+       python bench/bench_library.py --quick                   (600 particles, 1 worker)
 Target (issue 4): 10 000 particles in under a minute on 2 cores.
 """
 
@@ -41,4 +42,7 @@ def main(n=10000, workers=2):
 
 
 if __name__ == "__main__":
-    main(*(int(a) for a in sys.argv[1:3]))
+    if "--quick" in sys.argv[1:]:
+        main(600, 1)
+    else:
+        main(*(int(a) for a in sys.argv[1:3]))

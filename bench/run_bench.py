@@ -426,7 +426,8 @@ def main(argv=None):
                 run_entry(e, k)
 
     sieve = None if a.no_sieve else run_sieve(a.quick)
-    subprocess.run([sys.executable, os.path.join(HERE, "bench_polygons.py")] + ["--quick"] * a.quick, cwd=ROOT)
+    for script in ("bench_polygons.py", "bench_library.py"):  # 2D sections; ballast library build rate
+        subprocess.run([sys.executable, os.path.join(HERE, script)] + ["--quick"] * a.quick, cwd=ROOT)
     load1 = load()
     digest1 = source_digest()
     git1 = sh("git -C " + shlex.quote(ROOT) + " rev-parse --short HEAD") or "?"

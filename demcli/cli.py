@@ -49,8 +49,10 @@ def check(case, overrides):
 @click.argument("state", type=click.Path(dir_okay=False))
 def info(state):
     """Summarise a state file (.h5)."""
+    from demcli.stages.base import load_stage_types
     from demcli.state import summarize
 
+    load_stage_types()  # registers the stage-specific groups (gradation, polyhedra, ...)
     click.echo(summarize(state))
 
 

@@ -348,7 +348,7 @@ def run(ctx, cfg, state_in):
     from demcli.geometry import sieve_set
     from demcli.stages.ballast_library import ensure_library
     from demcli.state import RecordTable
-    from demcli.state.polyhedra import ShapeTable, rotation_matrices
+    from demcli.state.polyhedra import rotation_matrices
 
     g = {k: np.asarray(v) for k, v in state_in.groups["gradation"].items()}
     attrs = state_in.group_attrs["library"]
@@ -397,7 +397,7 @@ def run(ctx, cfg, state_in):
     # gradation check: target against achieved passing at every sieve
     sieves, target = g["sieves"], g["passing"]
     achieved = sieve_set(p["sieve_size"][rows], shapes.volume, sieves)
-    check = RecordTable("gradation_check", {"sieve": "mm", "target": "%", "achieved": "%", "difference": "%"})
+    check = RecordTable("gradation_check", {"sieve": "mm", "target": "%", "achieved": "%", "difference": "pp"})
     for s, t, a in zip(sieves, target, achieved):
         check.append(sieve=s * 1e3, target=float(t), achieved=float(a), difference=round(float(a - t), 9) + 0.0)
     classes = RecordTable("classes", {"lower": "mm", "upper": "mm", "target": "cm^3", "achieved": "cm^3",

@@ -408,6 +408,7 @@ def default_directory(ctx):
 
 
 def run(ctx, cfg, state_in):
+    from demcli.config.schema import canonical_json
     from demcli.state import RecordTable
 
     g = state_in.groups["gradation"]
@@ -427,8 +428,6 @@ def run(ctx, cfg, state_in):
     state.groups["gradation"] = {k: np.asarray(v) for k, v in g.items()}
     grp = library_group(lib)
     state.groups["library"] = grp
-    from demcli.config.schema import canonical_json
-
     state.group_attrs["library"] = {"path": str(path), "hash": lib.hash, "generator": canonical_json(gen)}
     table = RecordTable("library", {"lower": "mm", "upper": "mm", "count": "", "mean_volume": "cm^3",
                                     "mean_elongation": "1", "mean_flatness": "1", "flaky": "%", "elongated": "%"})

@@ -138,19 +138,18 @@ class ShapeTable:
         if not tables:
             return cls.from_polyhedra([])
         out = {}
-        for name, rows in (("vertex_start", "vertices"), ("face_start", None), ("face_vertex_start", "face_vertices"),
-                           ("edge_start", "edges")):
-            starts = [tables[0].__dict__[name][:1]]
+        for name in ("vertex_start", "face_start", "face_vertex_start", "edge_start"):  # CSR offsets, shifted
+            starts = [np.zeros(1, dtype=np.int64)]
             base = 0
             for t in tables:
-                starts.append(t.__dict__[name][1:] + base)
-                base += t.__dict__[name][-1]
+                starts.append(getattr(t, name)[1:] + base)
+                base += getattr(t, name)[-1]
             out[name] = np.concatenate(starts).astype(np.int64)
         vbase = np.cumsum([0] + [t.vertex_start[-1] for t in tables[:-1]])
         out["face_vertices"] = np.concatenate([t.face_vertices + b for t, b in zip(tables, vbase)]).astype(np.int64)
         out["edges"] = np.concatenate([t.edges + b for t, b in zip(tables, vbase)]).astype(np.int64)
         for name in ("vertices", "face_normal", "face_offset", "volume", "inertia", "radius"):
-            out[name] = np.concatenate([t.__dict__[name] for t in tables])
+            out[name] = np.concatenate([getattr(t, name) for t in tables])
         return cls(**out)
 
     def to_group(self):
@@ -163,7 +162,8 @@ class ShapeTable:
         return cls(**{name: np.asarray(group[name]) for name in SHAPE_FIELDS})
 
     def shape(self, k):
-        """Shape k as (vertices (n, 3), faces [local index arrays], normals (f, 3), offsets (f,), edges (e, 2) local)."""
+        """Shape k: (vertices (n, 3), faces [local index arrays], normals (f, 3), offsets (f,),
+        edges (e, 2) as local indices)."""
         v0, v1 = self.vertex_start[k], self.vertex_start[k + 1]
         f0, f1 = self.face_start[k], self.face_start[k + 1]
         fv = self.face_vertex_start

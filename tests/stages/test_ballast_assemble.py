@@ -50,7 +50,7 @@ def test_gradation_matches_the_target(runs, name):
     rows = list(csv.DictReader(open(runs[name] / "records" / "assembly_gradation_check.csv")))
     assert [float(r["sieve[mm]"]) for r in rows] == pytest.approx([16, 25, 35.5, 45, 56, 63])
     assert [float(r["target[%]"]) for r in rows] == pytest.approx(g["passing"].tolist())
-    assert max(abs(float(r["difference[%]"])) for r in rows) <= 2.0
+    assert max(abs(float(r["difference[pp]"])) for r in rows) <= 2.0
     # and every body's size class is the one its sieve size falls in
     s = st["polyhedra/sieve_size"]
     assert np.all((s > g["class_lower"][cls]) & (s <= g["class_upper"][cls]))
