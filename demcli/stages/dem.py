@@ -11,6 +11,7 @@ bit-identically.
 
 import math
 import time as _time
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -299,7 +300,29 @@ def reference_energy(system):
     return e
 
 
+@dataclass
+class Hooks:
+    """What a stage built on :func:`integrate` adds to the ``dem`` stage loop.
+
+    Attributes:
+        columns: extra record columns {name: unit} of the ``dem`` table.
+        row: ``row(system) -> dict`` values of those columns at each record.
+        stop: ``stop(system, row) -> str | None``: a reason to end the stage at a record.
+        finish: ``finish(ctx, system, state, table)`` after the loop (extra outputs).
+    """
+
+    columns: dict = field(default_factory=dict)
+    row: object = None
+    stop: object = None
+    finish: object = None
+
+
 def run(ctx, cfg, state_in):
+    return integrate(ctx, cfg, state_in)
+
+
+def integrate(ctx, cfg, state_in, hooks=None):
+    """The ``dem`` stage loop on ``cfg`` (the dem schema's keys), with a stage's ``hooks``."""
     from demcli.kernels import layout as K
     from demcli.state import RecordTable
     from demcli.state.vtu import Snapshots
@@ -334,6 +357,8 @@ def run(ctx, cfg, state_in):
     if energy:
         cols.update({k: "J" for k in ("strain", "gravity", "damping", "friction", "body_damping", "wall_work",
                                       "total")})
+    hooks = hooks or Hooks()
+    cols.update(hooks.columns)
     if ckpt is not None:
         table = RecordTable.from_state(ckpt, "dem")
         wtable = RecordTable.from_state(ckpt, "walls") if len(system.walls) else None
@@ -364,6 +389,8 @@ def run(ctx, cfg, state_in):
         if energy:
             row.update(system.energy_record())
             row["kinetic"] = ke
+        if hooks.row is not None:
+            row.update(hooks.row(system))
         table.append(row)
         if wtable is not None:
             wrow = {"time": system.time}
@@ -372,7 +399,7 @@ def run(ctx, cfg, state_in):
                 wrow[f"{name}.position"] = float(system.wpoint[k] @ n)
                 wrow[f"{name}.force"] = float(-system.wforce[k] @ n)
             wtable.append(wrow)
-        return ke
+        return row
 
     def snapshot():
         snaps.write(ctx.state_from(system, plan, extra=None))
@@ -401,12 +428,16 @@ def run(ctx, cfg, state_in):
             # chunks of about 0.5 s keep Ctrl-C and progress responsive; physics does not depend on them
             chunk = max(1, min(rec_every, int(n * 0.5 / max(elapsed, 1e-6))))
             if system.step % rec_every == 0 or system.step == total:
-                ke = record()
+                row = record()
                 last_good = system.snapshot()
                 if cfg.stop is not None and system.time >= cfg.stop.min_time and \
-                        ke / max(nb, 1) < cfg.stop.kinetic_ratio * e_unit:
+                        row["kinetic"] / max(nb, 1) < cfg.stop.kinetic_ratio * e_unit:
                     stopped = f"at rest (kinetic ratio < {cfg.stop.kinetic_ratio:g}) at t = {system.time:.4g} s"
                     break
+                if hooks.stop is not None:
+                    stopped = hooks.stop(system, row)
+                    if stopped:
+                        break
             if snap_every and system.step % snap_every == 0 and system.step < total:
                 snapshot()
             progress.update(system.step)
@@ -443,6 +474,8 @@ def run(ctx, cfg, state_in):
     if energy:
         ctx.write_records(table, x="time", ys=["kinetic", "strain", "gravity", "damping", "friction",
                                                 "body_damping", "total"], suffix="energy")
+    if hooks.finish is not None:
+        hooks.finish(ctx, system, st, table)
     return st
 
 
