@@ -62,3 +62,10 @@ register(EffectSpec(
     fields=(("orientation", "body"), ("angular_momentum", "body"), ("member_csr", "sphere"),
             ("sphere_kinematics", "sphere")),
     passes=("members:place", "bodies:sum_members"), counters=("members", "body")))
+register(EffectSpec(
+    "polyhedra", "rigid convex polyhedra (derived from the state): exact overlap-volume contacts",
+    fields=(("world_vertices", "body"), ("world_planes", "body"), ("contact_ft", "pair")),
+    passes=("polyhedra:world_geometry", "pairs:overlap_volume"), counters=("pairs",)))
+register(EffectSpec(
+    "adaptive_damping", "mass-proportional damping whose alpha adapts by R = E_a / |dE_k| (Shao et al. 2017)",
+    passes=("body_loads:adaptive_damping",), counters=("damping",)))

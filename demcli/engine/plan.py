@@ -37,19 +37,22 @@ class Plan:
         return "\n".join(lines)
 
 
-def make_plan(declared, clumps=False, walls=False):
+def make_plan(declared, clumps=False, walls=False, polyhedra=False):
     """Plan for the declared effect names plus what the state implies.
 
     Args:
         declared: iterable of effect names the stage declares (keys of EFFECTS).
         clumps: the state holds bodies made of several spheres.
         walls: the stage has walls.
+        polyhedra: the state's bodies are convex polyhedra.
     """
     active = set(declared)
     unknown = active - set(EFFECTS)
     if unknown:
         raise ValueError(f"unknown effects: {sorted(unknown)}")
-    if clumps:
+    if polyhedra:
+        active.add("polyhedra")
+    elif clumps:
         active.add("clumps")
     if walls:
         active.add("walls")

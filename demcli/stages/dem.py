@@ -11,6 +11,7 @@ bit-identically.
 
 import math
 import time as _time
+from pathlib import Path
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -85,6 +86,9 @@ FIELDS = {
         "rolling_resistance": Bool(default=False, doc="rolling resistance from material rolling_friction"),
         "local_damping": Optional(Float(min=0, max=1, max_inclusive=False), doc="Cundall local damping lambda"),
         "viscous_damping": Optional(Float("Hz", min=0), doc="mass-proportional damping alpha"),
+        "adaptive_damping": Optional(Section({
+            "initial": Float("Hz", min=0, min_inclusive=False, default=0.1, doc="starting alpha"),
+        }), doc="polyhedra: mass-proportional damping adapted by R = E_a/|dE_k| (seed 002)"),
         "energy": Bool(default=False, doc="energy book-keeping (losses, wall work, balance)"),
     }, default={}, doc="the effects this stage simulates; nothing else runs"),
     "contact": Section({
@@ -157,6 +161,8 @@ def declared_effects(cfg, dimension):
         eff.append("local_damping")
     if p.viscous_damping is not None:
         eff.append("viscous_damping")
+    if p.adaptive_damping is not None:
+        eff.append("adaptive_damping")
     if dimension == 2:
         eff.append("planar")
     return eff
@@ -247,6 +253,10 @@ def build_walls(cfg, case):
     return walls
 
 
+def _is_polyhedral(groups):
+    return "polyhedra" in groups and len(groups["bodies"]["mass"]) > 0
+
+
 def _is_clumped(groups):
     s = groups["spheres"]
     return len(s["radius"]) != len(groups["bodies"]["mass"]) or bool(np.any(s["offset"] != 0.0))
@@ -258,14 +268,25 @@ def make_system(ctx, cfg, groups, time=0.0, step=0):
     from demcli.engine.system import Dynamics, System
 
     walls = build_walls(cfg, ctx.case)
-    plan = make_plan(declared_effects(cfg, ctx.case.dimension), clumps=_is_clumped(groups), walls=len(walls) > 0)
+    poly = _is_polyhedral(groups)
+    declared = declared_effects(cfg, ctx.case.dimension)
+    if not poly and "adaptive_damping" in declared:
+        raise InputError(f"stage {ctx.name}: physics.adaptive_damping is for polyhedral bodies only")
+    if poly and ("energy" in declared or "rolling_resistance" in declared or "planar" in declared):
+        raise InputError(f"stage {ctx.name}: polyhedral bodies support gravity, friction and damping "
+                         "(energy book-keeping, rolling resistance and 2D are for spheres)")
+    plan = make_plan(declared, clumps=not poly and _is_clumped(groups), walls=len(walls) > 0, polyhedra=poly)
     p = cfg.physics
     dyn = Dynamics(gravity=tuple(p.gravity) if p.gravity is not None else (0.0, 0.0, 0.0),
                    local_damping=p.local_damping or 0.0, viscous_damping=p.viscous_damping or 0.0,
                    skin=cfg.neighbors.skin, check_every=cfg.safety.check_every,
                    overlap_limit=cfg.safety.overlap_limit, energy_limit=cfg.safety.energy_limit)
+    if poly:
+        from demcli.engine.poly_system import PolySystem as System  # noqa: F811
     system = System(groups, case_materials(ctx.case), contact_model(cfg), plan, walls, dyn, dt=1.0,
                     time=time, step=step)
+    if p.adaptive_damping is not None:
+        system.alpha = float(p.adaptive_damping.initial)
     dt_crit = system.critical_dt()
     if cfg.time.dt is not None:
         dt = cfg.time.dt
@@ -278,10 +299,45 @@ def make_system(ctx, cfg, groups, time=0.0, step=0):
     return system, plan, dt, dt_crit
 
 
+class _Snapshots:
+    """Sphere or polyhedron snapshots plus walls, one ``write(state)`` and ``truncate(time)``."""
+
+    def __init__(self, folder, polyhedra, resume):
+        from demcli.state.vtu import PvdSeries, Snapshots
+
+        if polyhedra:
+            from demcli.state.vtu_poly import PolyhedraSnapshots
+
+            self.bodies = PolyhedraSnapshots(folder, resume=resume)
+            self.walls = PvdSeries(Path(folder) / "walls.pvd", resume=resume)
+        else:
+            self.bodies = Snapshots(folder, resume=resume)
+            self.walls = None
+        self.folder = Path(folder)
+
+    def write(self, state):
+        from demcli.state.vtu import write_walls_vtu
+
+        self.bodies.write(state)
+        if self.walls is not None and "walls/kind" in state and len(state["walls/kind"]):
+            path = write_walls_vtu(self.folder / f"walls_{self.bodies.count - 1:06d}.vtu", state)
+            self.walls.add(float(state.meta.get("time", 0.0)), path)
+
+    def truncate(self, time):
+        if self.walls is None:
+            self.bodies.spheres.truncate(time)
+            self.bodies.walls.truncate(time)
+            self.bodies.count = len(self.bodies.spheres)
+        else:
+            self.bodies.series.truncate(time)
+            self.walls.truncate(time)
+            self.bodies.count = len(self.bodies.series)
+
+
 def reference_energy(system):
     """Energy scale for the runaway guard: what gravity, walls and the start can supply [J]."""
     g = float(np.linalg.norm(system.gravity)) if system.plan.has("gravity") else 0.0
-    pts = [system.xs]
+    pts = [system.x]
     if len(system.walls):
         pts.append(system.wpoint)
     allp = np.concatenate(pts)
@@ -325,8 +381,6 @@ def integrate(ctx, cfg, state_in, hooks=None):
     """The ``dem`` stage loop on ``cfg`` (the dem schema's keys), with a stage's ``hooks``."""
     from demcli.kernels import layout as K
     from demcli.state import RecordTable
-    from demcli.state.vtu import Snapshots
-
     ckpt = ctx.load_checkpoint()
     source = ckpt if ckpt is not None else state_in
     groups = source.groups
@@ -371,11 +425,9 @@ def integrate(ctx, cfg, state_in, hooks=None):
                 wcols[f"{name}.position"] = "m"
                 wcols[f"{name}.force"] = "N"
             wtable = RecordTable("walls", wcols)
-    snaps = Snapshots(ctx.snapshot_dir, resume=ckpt is not None)
+    snaps = _Snapshots(ctx.snapshot_dir, plan.has("polyhedra"), resume=ckpt is not None)
     if ckpt is not None:
-        snaps.spheres.truncate(system.time)
-        snaps.walls.truncate(system.time)
-        snaps.count = len(snaps.spheres)
+        snaps.truncate(system.time)
     nb = len(system.mass)
     d_mean = 2.0 * float(system.rad.mean())
     g = float(np.linalg.norm(system.gravity))
