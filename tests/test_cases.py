@@ -56,3 +56,22 @@ def test_clumps_stay_rigid_and_inside_the_mould(tmp_path):
     assert np.all(c[:, 2] - after["spheres/radius"] > -0.5e-3)
     # and the bodies fell: the mean height dropped
     assert after["bodies/x"][:, 2].mean() < before["bodies/x"][:, 2].mean() - 2e-3
+
+
+def test_check_compiles_no_kernel():
+    # Given a fresh interpreter that checks the quickstart case
+    import subprocess
+    import sys
+
+    code = (
+        "import sys, numba\n"
+        "from demcli.check import describe_case\n"
+        "describe_case(sys.argv[1])\n"
+        "import demcli.kernels.step as a, demcli.kernels.neighbors as b, demcli.kernels.contact as c\n"
+        "d = [f for m in (a, b, c) for f in vars(m).values() if isinstance(f, numba.core.dispatcher.Dispatcher)]\n"
+        "assert d, 'no kernels found'\n"
+        "print(sum(len(f.signatures) for f in d))\n")
+    out = subprocess.run([sys.executable, "-c", code, str(CASES / "quickstart.yaml")], capture_output=True,
+                         text=True, check=True)
+    # Then no kernel has a compiled signature
+    assert out.stdout.strip() == "0"
