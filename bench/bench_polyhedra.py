@@ -5,12 +5,15 @@ Pairs of random Voronoi ballast shapes (``random_ballast_shape``, 20-40 faces, l
 the overlap is a drawn fraction V / min(V_A, V_B) of 1e-4 .. 1e-2 (log-uniform, the
 range of DEM contacts). All bodies are stored the way the engine will hold them
 (one world vertex array, CSR faces with shape-global rows), and one numba loop
-evaluates :func:`demcli.kernels.polyhedra.overlap` for every pair plus
-:func:`contact_frame` (normal, area, depth), after JIT, on one thread. Also timed:
+evaluates :func:`demcli.kernels.polyhedra.overlap_ws` (scratch allocated once, as a
+contact pass does per thread) for every pair plus :func:`contact_frame` (normal,
+area, depth), after JIT, on one thread; CPU time of the thread, best of --repeat.
+The allocating :func:`overlap` is timed too. Also timed:
 the same pairs pulled apart until their bounding spheres still overlap but the
 bodies do not (the broad-phase false positives a contact pass also sees).
 
-Usage: python bench/bench_polyhedra.py [--pairs 400] [--shapes 60] [--repeat 5] [--seed 1]
+Usage: python bench/bench_polyhedra.py [--pairs 400] [--shapes 60] [--repeat 10] [--seed 1]
+[--method voronoi|hull]
 The last line is ``contacts_per_s=<number>``.
 """
 
@@ -34,12 +37,12 @@ def random_quaternion(rng):
     return q / np.linalg.norm(q)
 
 
-def build_pairs(n_pairs, n_shapes, seed):
+def build_pairs(n_pairs, n_shapes, seed, method="voronoi"):
     from demcli.geometry.ballast_shapes import ShapeParams, random_ballast_shape
     from demcli.kernels.polyhedra import place, polyhedron_overlap
 
     rng = np.random.default_rng(seed)
-    params = ShapeParams(faces=(20, 40))
+    params = ShapeParams(method=method, faces=(20, 40))
     shapes = [random_ballast_shape(rng, params) for _ in range(n_shapes)]
     bodies = []  # (placed A, placed B) per pair
     fractions = []
@@ -98,23 +101,34 @@ def pack(pairs):
     return vstart, verts, fstart, face_vertex_start, face_vertices, normals, offsets, centers, radii
 
 
-def make_loop():
+def make_loop(with_scratch):
     from demcli.jit import njit
-    from demcli.kernels.polyhedra import contact_frame, overlap
+    from demcli.kernels.polyhedra import contact_frame, overlap, overlap_ws
 
     @njit(cache=False)
-    def loop(vstart, verts, fstart, fvs, fv, normals, offsets, centers, radii, out):
+    def pair(vstart, verts, fstart, fvs, fv, normals, offsets, centers, radii, i, j, buf, fw, planes):
+        vi, vj = vstart[i], vstart[j]
+        fi, fj = fstart[i], fstart[j]
+        if with_scratch:
+            return overlap_ws(verts[vi:vstart[i + 1]], fvs[fi:fstart[i + 1] + 1], fv, vi,
+                              normals[fi:fstart[i + 1]], offsets[fi:fstart[i + 1]],
+                              centers[i, 0], centers[i, 1], centers[i, 2], radii[i],
+                              verts[vj:vstart[j + 1]], fvs[fj:fstart[j + 1] + 1], fv, vj,
+                              normals[fj:fstart[j + 1]], offsets[fj:fstart[j + 1]],
+                              centers[j, 0], centers[j, 1], centers[j, 2], radii[j], buf, fw, planes)
+        return overlap(verts[vi:vstart[i + 1]], fvs[fi:fstart[i + 1] + 1], fv, vi,
+                       normals[fi:fstart[i + 1]], offsets[fi:fstart[i + 1]],
+                       centers[i, 0], centers[i, 1], centers[i, 2], radii[i],
+                       verts[vj:vstart[j + 1]], fvs[fj:fstart[j + 1] + 1], fv, vj,
+                       normals[fj:fstart[j + 1]], offsets[fj:fstart[j + 1]],
+                       centers[j, 0], centers[j, 1], centers[j, 2], radii[j])
+
+    @njit(cache=False)
+    def loop(vstart, verts, fstart, fvs, fv, normals, offsets, centers, radii, buf, fw, planes, out):
         for k in range(out.shape[0]):
             i = 2 * k
             j = i + 1
-            vi, vj = vstart[i], vstart[j]
-            fi, fj = fstart[i], fstart[j]
-            r = overlap(verts[vi:vstart[i + 1]], fvs[fi:fstart[i + 1] + 1], fv, vi,
-                        normals[fi:fstart[i + 1]], offsets[fi:fstart[i + 1]],
-                        centers[i, 0], centers[i, 1], centers[i, 2], radii[i],
-                        verts[vj:vstart[j + 1]], fvs[fj:fstart[j + 1] + 1], fv, vj,
-                        normals[fj:fstart[j + 1]], offsets[fj:fstart[j + 1]],
-                        centers[j, 0], centers[j, 1], centers[j, 2], radii[j])
+            r = pair(vstart, verts, fstart, fvs, fv, normals, offsets, centers, radii, i, j, buf, fw, planes)
             nx, ny, nz, area, depth = contact_frame(r[0], r[4], r[5], r[6], centers[i, 0], centers[i, 1],
                                                     centers[i, 2], centers[j, 0], centers[j, 1], centers[j, 2],
                                                     radii[i], radii[j])
@@ -126,13 +140,18 @@ def make_loop():
 
 
 def timed(loop, arrays, n, repeat):
+    from demcli.kernels.polyhedra import scratch
+
+    fvs, nfaces = arrays[3], np.diff(arrays[2])
     out = np.empty((n, 4))
-    loop(*arrays, out)  # JIT
+    ws = scratch(int(np.diff(fvs).max()), int(nfaces.max()))
+    loop(*arrays, *ws, out)  # JIT
     best = np.inf
     for _ in range(repeat):
-        t0 = time.perf_counter()
-        loop(*arrays, out)
-        best = min(best, time.perf_counter() - t0)
+        # CPU time of this thread: the machine's cores are shared with other work
+        t0 = time.thread_time()
+        loop(*arrays, *ws, out)
+        best = min(best, time.thread_time() - t0)
     return best, out
 
 
@@ -140,24 +159,28 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--pairs", type=int, default=400)
     ap.add_argument("--shapes", type=int, default=60)
-    ap.add_argument("--repeat", type=int, default=5)
+    ap.add_argument("--repeat", type=int, default=10)
     ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--method", choices=("voronoi", "hull"), default="voronoi",
+                    help="shape generator: Voronoi cells (polygonal faces) or point hulls (triangles)")
     args = ap.parse_args()
 
     import numba
 
     numba.set_num_threads(1)
     t0 = time.perf_counter()
-    pairs, fractions, apart = build_pairs(args.pairs, args.shapes, args.seed)
+    pairs, fractions, apart = build_pairs(args.pairs, args.shapes, args.seed, args.method)
     setup = time.perf_counter() - t0
     nf = np.array([len(p.normals) for pair in pairs for p in pair])
     print(f"# {platform.processor() or platform.machine()}, python {platform.python_version()}, "
           f"numba {numba.__version__}, 1 thread")
-    print(f"# {len(pairs)} overlapping pairs (setup {setup:.1f} s): faces {nf.min()}-{nf.max()} "
-          f"(mean {nf.mean():.1f}), V/V_min {fractions.min():.1e}..{fractions.max():.1e} "
+    print(f"# {len(pairs)} overlapping pairs of {args.method} shapes (setup {setup:.1f} s): "
+          f"faces {nf.min()}-{nf.max()} (mean {nf.mean():.1f}), V/V_min {fractions.min():.1e}..{fractions.max():.1e} "
           f"(median {np.median(fractions):.1e})")
-    loop = make_loop()
-    best, out = timed(loop, pack(pairs), len(pairs), args.repeat)
+    packed = pack(pairs)
+    best_alloc, _ = timed(make_loop(False), packed, len(pairs), args.repeat)
+    loop = make_loop(True)
+    best, out = timed(loop, packed, len(pairs), args.repeat)
     assert np.all(np.isfinite(out)) and np.all(out[:, 0] > 0.0)
     rate = len(pairs) / best
     if apart:
@@ -165,7 +188,10 @@ def main():
         assert np.all(out2[:, 0] == 0.0)
         print(f"# separated pairs with overlapping bounding spheres: {len(apart)}, "
               f"{len(apart) / best_apart:.3g} evaluations/s")
-    print(f"# overlapping pairs: {1e6 * best / len(pairs):.2f} us per contact (best of {args.repeat})")
+    print(f"# overlapping pairs, overlap() allocating its scratch: {1e6 * best_alloc / len(pairs):.2f} us per "
+          f"contact ({len(pairs) / best_alloc:.3g}/s)")
+    print(f"# overlapping pairs, overlap_ws() with per-thread scratch: {1e6 * best / len(pairs):.2f} us per "
+          f"contact (best of {args.repeat})")
     print(f"contacts_per_s={rate:.4g}")
 
 
