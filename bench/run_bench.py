@@ -426,8 +426,11 @@ def main(argv=None):
                 run_entry(e, k)
 
     sieve = None if a.no_sieve else run_sieve(a.quick)
-    for script in ("bench_polygons.py", "bench_library.py"):  # 2D sections; ballast library build rate
-        subprocess.run([sys.executable, os.path.join(HERE, script)] + ["--quick"] * a.quick, cwd=ROOT)
+    # 2D sections; ballast library build rate; polyhedron narrow phase; the peers' poly scene
+    quick_args = {"bench_polygons.py": ["--quick"], "bench_library.py": ["--quick"], "bench_polyhedra.py": [],
+                  "bench_poly.py": ["--n", "100", "--steps", "1000"]}
+    for script, qargs in quick_args.items():
+        subprocess.run([sys.executable, os.path.join(HERE, script)] + (qargs if a.quick else []), cwd=ROOT)
     load1 = load()
     digest1 = source_digest()
     git1 = sh("git -C " + shlex.quote(ROOT) + " rev-parse --short HEAD") or "?"

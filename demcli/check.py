@@ -48,12 +48,15 @@ def describe_case(path, overrides=()):
         if cfg.type != "dem":
             continue
         scene = _scene_estimate(case, k)
-        plan = dem.plan_summary(case, cfg, {"clumps": bool(scene and scene[3])})
+        poly = any(c.type == "assemble" for c in case.stages[:k])
+        plan = dem.plan_summary(case, cfg, {"clumps": bool(scene and scene[3]), "polyhedra": poly})
         lines += ["  " + line for line in plan.describe().splitlines()]
         if cfg.walls:
             lines.append(f"  walls: {len(dem.build_walls(cfg, case))}")
         if scene is None:
-            lines.append("  time step: decided at run time (no generate stage before this one)")
+            lines.append("  time step: decided at run time from the bodies of the input state "
+                         f"({cfg.time.dt_factor:g} x critical)" if cfg.time.dt is None else
+                         f"  time step: {cfg.time.dt:.4g} s (checked against the critical step at run time)")
             continue
         r, m, mat, _ = scene
         model = dem.contact_model(cfg)

@@ -252,7 +252,9 @@ class Runner:
                         continue
                 ctx = StageContext(self, k, cfg, chash, input_hash)
                 if state_in is not None and "spheres" in state_in.groups:
-                    ctx._nparticles = len(state_in.groups["spheres"]["radius"])
+                    # spheres, or bodies when the particles are polyhedra (no spheres)
+                    ctx._nparticles = (len(state_in.groups["spheres"]["radius"])
+                                       or len(state_in.groups["bodies"]["mass"]))
                 self.log(f"[{cfg.name}] {cfg.type} stage started")
                 t0 = _time.perf_counter()
                 state = st_type.run(ctx, cfg, state_in)

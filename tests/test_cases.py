@@ -22,7 +22,7 @@ def test_case_validates_and_plans(case):
     assert result.exit_code == 0, result.output
     assert "valid" in result.output
     if "type: dem" in case.read_text():
-        assert "time step:" in result.output and "x critical" in result.output
+        assert "time step:" in result.output and "critical" in result.output
 
 
 def test_planar_mode_keeps_motion_in_plane(tmp_path):

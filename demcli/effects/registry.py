@@ -69,3 +69,6 @@ register(EffectSpec(
 register(EffectSpec(
     "adaptive_damping", "mass-proportional damping whose alpha adapts by R = E_a / |dE_k| (Shao et al. 2017)",
     passes=("body_loads:adaptive_damping",), counters=("damping",)))
+register(EffectSpec(
+    "contact_damping", "polyhedra: normal dashpot c_n = 2 zeta sqrt(m* k_n sqrt(A)) from the material restitution",
+    passes=("pairs:contact_damping",)))

@@ -86,6 +86,8 @@ FIELDS = {
         "rolling_resistance": Bool(default=False, doc="rolling resistance from material rolling_friction"),
         "local_damping": Optional(Float(min=0, max=1, max_inclusive=False), doc="Cundall local damping lambda"),
         "viscous_damping": Optional(Float("Hz", min=0), doc="mass-proportional damping alpha"),
+        "contact_damping": Bool(default=False, doc="polyhedra: normal dashpot from the material restitution "
+                                "(sphere laws always have theirs)"),
         "adaptive_damping": Optional(Section({
             "initial": Float("Hz", min=0, min_inclusive=False, default=0.1, doc="starting alpha"),
         }), doc="polyhedra: mass-proportional damping adapted by R = E_a/|dE_k| (seed 002)"),
@@ -154,7 +156,7 @@ def declared_effects(cfg, dimension):
     eff = []
     if p.gravity is not None:
         eff.append("gravity")
-    for key in ("friction", "rolling_resistance", "energy"):
+    for key in ("friction", "rolling_resistance", "energy", "contact_damping"):
         if p[key]:
             eff.append(key)
     if p.local_damping is not None:
@@ -262,16 +264,17 @@ def _is_clumped(groups):
     return len(s["radius"]) != len(groups["bodies"]["mass"]) or bool(np.any(s["offset"] != 0.0))
 
 
-def make_system(ctx, cfg, groups, time=0.0, step=0):
-    """System, plan and time-step information for this stage."""
+def make_system(ctx, cfg, groups, time=0.0, step=0, resume=False):
+    """System, plan and time-step information for this stage (``resume``: from a checkpoint)."""
     from demcli.engine.plan import make_plan
     from demcli.engine.system import Dynamics, System
 
     walls = build_walls(cfg, ctx.case)
     poly = _is_polyhedral(groups)
     declared = declared_effects(cfg, ctx.case.dimension)
-    if not poly and "adaptive_damping" in declared:
-        raise InputError(f"stage {ctx.name}: physics.adaptive_damping is for polyhedral bodies only")
+    for only_poly in ("adaptive_damping", "contact_damping"):
+        if not poly and only_poly in declared:
+            raise InputError(f"stage {ctx.name}: physics.{only_poly} is for polyhedral bodies only")
     if poly and ("energy" in declared or "rolling_resistance" in declared or "planar" in declared):
         raise InputError(f"stage {ctx.name}: polyhedral bodies support gravity, friction and damping "
                          "(energy book-keeping, rolling resistance and 2D are for spheres)")
@@ -285,7 +288,7 @@ def make_system(ctx, cfg, groups, time=0.0, step=0):
         from demcli.engine.poly_system import PolySystem as System  # noqa: F811
     system = System(groups, case_materials(ctx.case), contact_model(cfg), plan, walls, dyn, dt=1.0,
                     time=time, step=step)
-    if p.adaptive_damping is not None:
+    if p.adaptive_damping is not None and not resume:  # a resumed stage keeps its adapted alpha
         system.alpha = float(p.adaptive_damping.initial)
     dt_crit = system.critical_dt()
     if cfg.time.dt is not None:
@@ -385,7 +388,8 @@ def integrate(ctx, cfg, state_in, hooks=None):
     source = ckpt if ckpt is not None else state_in
     groups = source.groups
     system, plan, dt, dt_crit = make_system(ctx, cfg, groups, time=float(source.meta.get("time", 0.0)) if ckpt
-                                            else 0.0, step=int(source.meta.get("step", 0)) if ckpt else 0)
+                                            else 0.0, step=int(source.meta.get("step", 0)) if ckpt else 0,
+                                            resume=ckpt is not None)
     if ckpt is not None:
         system.wpoint[:] = groups["walls"]["point"]
         system.wv[:] = groups["walls"]["v"]
@@ -411,6 +415,8 @@ def integrate(ctx, cfg, state_in, hooks=None):
     if energy:
         cols.update({k: "J" for k in ("strain", "gravity", "damping", "friction", "body_damping", "wall_work",
                                       "total")})
+    if plan.has("adaptive_damping"):
+        cols["alpha"] = "1/s"
     hooks = hooks or Hooks()
     cols.update(hooks.columns)
     if ckpt is not None:
@@ -441,6 +447,8 @@ def integrate(ctx, cfg, state_in, hooks=None):
         if energy:
             row.update(system.energy_record())
             row["kinetic"] = ke
+        if plan.has("adaptive_damping"):
+            row["alpha"] = system.alpha
         if hooks.row is not None:
             row.update(hooks.row(system))
         table.append(row)
@@ -538,6 +546,10 @@ def _diagnosis(ctx, system, status, dt, dt_crit, cfg):
     where = f"stage {ctx.name} stopped at step {system.step} (t = {system.time:.6g} s): {K.STATUS_TEXT[status]}"
     if status == K.BAD_NUMBER:
         where += f" of body {int(system.body_id[int(info[0])])}"
+    elif status == K.BAD_OVERLAP and system.plan.has("polyhedra"):
+        other = "a wall" if int(info[1]) < 0 else f"body {int(system.body_id[int(info[1])])}"
+        where += (f": body {int(system.body_id[int(info[0])])} and {other} overlap to a depth of "
+                  f"{100 * info[2]:.3g} % of the bounding radius (limit {100 * cfg.safety.overlap_limit:.3g} %)")
     elif status == K.BAD_OVERLAP:
         where += (f": spheres {int(info[0])} and {int(info[1])} overlap {100 * info[2]:.3g} % of the smaller radius "
                   f"(limit {100 * cfg.safety.overlap_limit:.3g} %)")
@@ -553,7 +565,7 @@ def plan_summary(ctx_case, cfg, scene):
     from demcli.engine.plan import make_plan
 
     return make_plan(declared_effects(cfg, ctx_case.dimension), clumps=scene.get("clumps", False),
-                     walls=len(cfg.walls) > 0)
+                     walls=len(cfg.walls) > 0, polyhedra=scene.get("polyhedra", False))
 
 
 register_stage(StageType(

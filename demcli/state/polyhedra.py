@@ -63,6 +63,31 @@ for _name, _kind, _dims, _unit, _doc, _kw in [
         ("radius", "f", ("n_shape",), "m", "largest vertex distance from the centroid", {})]:
     register(Field(f"polyhedron_shapes/{_name}", _kind, _dims, _unit, _doc, writer="stage assemble", **_kw))
 
+register_group("body_contacts", "Persistent polyhedron-polyhedron contacts with their history",
+               writer="engine (polyhedra)")
+for _name, _kind, _dims, _unit, _doc, _kw in [
+        ("i", "i", ("n_bc",), "", "first body (i < j)", {"index_of": "n_b"}),
+        ("j", "i", ("n_bc",), "", "second body", {"index_of": "n_b"}),
+        ("ft", "f", ("n_bc", 3), "N", "tangential spring force (history)", {"required": False}),
+        ("force", "f", ("n_bc", 3), "N", "last contact force on body i", {})]:
+    register(Field(f"body_contacts/{_name}", _kind, _dims, _unit, _doc, writer="engine (polyhedra)", **_kw))
+
+register_group("body_wall_contacts", "Persistent polyhedron-wall contacts with their history",
+               writer="engine (polyhedra)")
+for _name, _kind, _dims, _unit, _doc, _kw in [
+        ("body", "i", ("n_bwc",), "", "body index", {"index_of": "n_b"}),
+        ("wall", "i", ("n_bwc",), "", "wall index", {"index_of": "n_w"}),
+        ("ft", "f", ("n_bwc", 3), "N", "tangential spring force (history)", {"required": False}),
+        ("force", "f", ("n_bwc", 3), "N", "last contact force on the body", {})]:
+    register(Field(f"body_wall_contacts/{_name}", _kind, _dims, _unit, _doc, writer="engine (polyhedra)", **_kw))
+
+register_group("adaptive_damping", "State of the adaptive mass-proportional damping (seed 002, eqs. 23-27)",
+               writer="effect adaptive_damping")
+register(Field("adaptive_damping/alpha", "f", (), "1/s", "current damping coefficient alpha",
+               writer="effect adaptive_damping"))
+register(Field("adaptive_damping/ke_prev", "f", (), "J", "kinetic energy at the previous step",
+               writer="effect adaptive_damping"))
+
 SHAPE_FIELDS = ("vertex_start", "vertices", "face_start", "face_vertex_start", "face_vertices", "face_normal",
                 "face_offset", "edge_start", "edges", "volume", "inertia", "radius")
 

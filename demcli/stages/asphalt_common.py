@@ -1,0 +1,272 @@
+"""Shared pieces of the 3D asphalt stages (seed 000): state groups, aggregate clumps, VTU.
+
+The pipeline ``gradation -> place_spheres -> carve -> compact -> cut -> mastic`` passes
+these groups along (see docs/asphalt3d.md):
+
+* ``seeds``: the spheres placed by gradation, kept after the spheres are deleted
+  (centre, radius, class, material), with what became of each;
+* ``aggregates``: one row per carved aggregate: its body, class, sieve size, volume and
+  its cutting planes in the body frame (so every later stage can check that the member
+  balls still lie between them);
+* ``specimen`` (cut), ``mastic`` and ``phases`` (mastic).
+
+Aggregates are bodies ``0 .. n_agg - 1``; mastic balls, when present, follow.
+"""
+
+import math
+
+import numpy as np
+
+from demcli.state.fields import Field, register, register_group
+
+SEEDS_WRITER = "stage place_spheres (updated by carve)"
+AGG_WRITER = "stage carve (updated by cut and mastic)"
+
+register_group("seeds", "Seed spheres of the carving (seed 000): placed by gradation, then deleted",
+               writer=SEEDS_WRITER)
+for _name, _kind, _dims, _unit, _doc, _kw in [
+        ("centre", "f", ("n_seed", 3), "m", "sphere centre", {}),
+        ("radius", "f", ("n_seed",), "m", "sphere radius", {}),
+        ("class", "i", ("n_seed",), "", "gradation class the radius was drawn from (gradation/class_*)", {}),
+        ("material", "i", ("n_seed",), "", "material of the aggregate carved from it", {"index_of": "n_m"}),
+        ("status", "i", ("n_seed",), "", "0 placed, 1 carved into an aggregate, 2 no lattice ball inside, "
+                                         "3 dropped as fines, 4 removed by the gradation adjustment",
+         {"dtype": "int8"}),
+        ("round", "i", ("n_seed",), "", "adjustment round that placed it (0: the place_spheres stage)", {}),
+        ("region", "f", (6,), "m", "box the seeds were placed in: xmin ymin zmin xmax ymax zmax", {})]:
+    register(Field(f"seeds/{_name}", _kind, _dims, _unit, _doc, writer=SEEDS_WRITER, **_kw))
+
+register_group("aggregates", "Carved aggregates (seed 000): rigid clumps of lattice balls, one row each",
+               writer=AGG_WRITER)
+for _name, _kind, _dims, _unit, _doc, _kw in [
+        ("body", "i", ("n_agg",), "", "body of the aggregate (aggregates are bodies 0 .. n_agg - 1)",
+         {"index_of": "n_b"}),
+        ("seed", "i", ("n_agg",), "", "seed sphere it was carved from", {"index_of": "n_seed"}),
+        ("seed_class", "i", ("n_agg",), "", "gradation class of its seed sphere", {}),
+        ("size_class", "i", ("n_agg",), "", "class by virtual sieving (-1: passes the smallest class sieve)", {}),
+        ("sieve_size", "f", ("n_agg",), "m", "sieve size of the clump (projection method)", {}),
+        ("volume", "f", ("n_agg",), "m^3", "solid volume: members x element volume (see mass_model)", {}),
+        ("plane_normal", "f", ("n_agg", 3, 3), "1", "unit normals of the three cutting-plane pairs, body frame", {}),
+        ("plane_spacing", "f", ("n_agg", 3), "m", "full spacing d_p of each plane pair", {}),
+        ("seed_offset", "f", ("n_agg", 3), "m", "seed sphere centre (the planes' centre), body frame", {}),
+        ("seed_radius", "f", ("n_agg",), "m", "seed sphere radius", {}),
+        ("lattice_axes", "f", ("n_agg", 3, 3), "1", "the lattice's x, y, z unit vectors in the body frame "
+                                                   "(member cells are cubes along them)", {}),
+        ("widths", "f", ("n_agg", 3), "m", "width of the carved polyhedron (sphere and slabs) along each "
+                                           "plane normal", {}),
+        ("ball_widths", "f", ("n_agg", 3), "m", "extent of the member balls along each plane normal", {}),
+        ("drawn_ratio", "f", ("n_agg",), "1", "drawn ratio of the largest to the smallest polyhedron width", {}),
+        ("flat_elongated", "i", ("n_agg",), "", "1 when max(widths) / min(widths) >= fe_ratio", {"dtype": "int8"}),
+        ("ball_radius", "f", (), "m", "radius of the lattice balls (spacing / 2)", {}),
+        ("lattice_origin", "f", (3,), "m", "centre of lattice ball (0, 0, 0)", {}),
+        ("lattice_counts", "i", (3,), "", "lattice balls along x, y, z", {}),
+        ("mass_model", "str", (), "", "'cells': a member stands for its lattice cell; 'balls': for its ball", {}),
+        ("fe_ratio", "f", (), "1", "width ratio from which a particle counts as flat/elongated", {})]:
+    register(Field(f"aggregates/{_name}", _kind, _dims, _unit, _doc, writer=AGG_WRITER, **_kw))
+
+FLAG_FIXED = 0
+
+
+def seed_status_text():
+    return {0: "placed", 1: "carved", 2: "empty", 3: "fines", 4: "removed"}
+
+
+# ---------------------------------------------------------------------------------------
+# helpers
+# ---------------------------------------------------------------------------------------
+
+def copy_group(state_in, name):
+    """A deep copy of a group of the input state (or None when absent)."""
+    g = state_in.groups.get(name)
+    if g is None:
+        return None
+    return {k: np.array(v, copy=True) for k, v in g.items()}
+
+
+def scalar_str(value):
+    """A scalar string dataset (str, bytes, 0-d or 1-element array) as str."""
+    v = np.asarray(value).reshape(-1)[0] if np.ndim(value) else np.asarray(value).reshape(()).item()
+    return v.decode() if isinstance(v, bytes) else str(v)
+
+
+def cell_order(points, cell):
+    """Indices sorting points by the cell of side ``cell`` they fall in (z slowest), stable."""
+    if len(points) == 0:
+        return np.zeros(0, np.int64)
+    c = np.floor((points - points.min(axis=0)) / cell).astype(np.int64)
+    return np.lexsort((c[:, 0], c[:, 1], c[:, 2]))
+
+
+def quat_matrix(q):
+    """Rotation matrices (n, 3, 3) body -> world of unit quaternions (w, x, y, z)."""
+    from scipy.spatial.transform import Rotation
+
+    q = np.asarray(q, float).reshape(-1, 4)
+    return Rotation.from_quat(q[:, [1, 2, 3, 0]]).as_matrix()
+
+
+def build_aggregate_bodies(start, points, ball_radius, density, mass_model, normals_w, spacing_p, seed_w,
+                           seed_radius, material, lattice_w=None):
+    """Bodies, spheres and per-aggregate plane fields of clumps given in the world frame.
+
+    start/points: CSR of member centres (m) per aggregate; density: kg/m^3, one value or
+    one per aggregate; normals_w (n, 3, 3) and seed_w (n, 3) the cutting planes in the
+    world frame; spacing_p (n, 3); material (n,); lattice_w (n, 3, 3) the lattice's unit
+    vectors in the world frame (default: the world axes, as at carving).
+    Returns (bodies, spheres, planes) with planes = dict(plane_normal, seed_offset) in
+    each body's principal frame. Members keep their order; spheres are grouped by body.
+    """
+    from demcli.geometry.carving import clump_set
+
+    cs = clump_set(start, points, 2.0 * ball_radius, 1.0, mass_model)
+    n = len(start) - 1
+    rho = np.broadcast_to(np.asarray(density, float), (n,))
+    axes = cs.axes
+    bodies = {"x": cs.com, "v": np.zeros((n, 3)), "q": cs.quat, "omega": np.zeros((n, 3)),
+              "mass": cs.mass * rho, "inertia": cs.moments * rho[:, None], "id": np.arange(n, dtype=np.int64),
+              "flags": np.zeros(n, np.int8)}
+    owner = np.repeat(np.arange(n, dtype=np.int64), cs.count)
+    spheres = {"body": owner, "offset": cs.offsets, "radius": np.full(len(owner), ball_radius),
+               "material": np.asarray(material, np.int64)[owner]}
+    if lattice_w is None:
+        lattice_w = np.broadcast_to(np.eye(3), (n, 3, 3))
+    planes = {"plane_normal": np.einsum("kji,kpj->kpi", axes, normals_w),   # A^T n
+              "seed_offset": np.einsum("kji,kj->ki", axes, seed_w - cs.com),
+              "plane_spacing": np.asarray(spacing_p, float), "seed_radius": np.asarray(seed_radius, float),
+              "lattice_axes": np.einsum("kji,kpj->kpi", axes, lattice_w)}
+    return bodies, spheres, planes, cs
+
+
+def world_planes(state, with_lattice=False):
+    """Cutting planes of every aggregate in the world frame: (normals (n, 3, 3), centres (n, 3)),
+    plus the lattice unit vectors (n, 3, 3) when ``with_lattice``."""
+    ag = state.groups["aggregates"]
+    body = np.asarray(ag["body"], np.int64)
+    rot = quat_matrix(state["bodies/q"][body])
+    normals = np.einsum("kij,kpj->kpi", rot, ag["plane_normal"])
+    centres = state["bodies/x"][body] + np.einsum("kij,kj->ki", rot, ag["seed_offset"])
+    if with_lattice:
+        return normals, centres, np.einsum("kij,kpj->kpi", rot, ag["lattice_axes"])
+    return normals, centres
+
+
+def inside_member_cells(state, points):
+    """Which points lie in an aggregate: inside the lattice cell (cube of side 2 r along
+    the aggregate's lattice axes) of one of its member balls; the voxel model of the
+    carved polyhedra (``mass_model: cells``), wherever the aggregates have moved."""
+    from scipy.spatial import cKDTree
+
+    pts = np.asarray(points, float)
+    out = np.zeros(len(pts), bool)
+    if len(pts) == 0 or "aggregates" not in state.groups:
+        return out
+    agg = phase_of_spheres(state)
+    mine = np.flatnonzero(agg >= 0)
+    if len(mine) == 0:
+        return out
+    _, _, lat = world_planes(state, with_lattice=True)
+    centres = state.sphere_centres()[mine]
+    axes = lat[agg[mine]]  # (m, 3, 3): rows are the lattice unit vectors
+    a = 2.0 * float(np.asarray(state.groups["aggregates"]["ball_radius"]))
+    tree = cKDTree(centres)
+    k = 8  # a point lies in at most one cell per aggregate; 8 neighbours cover nested ones
+    dist, idx = tree.query(pts, k=k, distance_upper_bound=0.5 * math.sqrt(3.0) * a * (1 + 1e-9))
+    for col in range(k):
+        ok = np.isfinite(dist[:, col])
+        if not ok.any():
+            continue
+        j = idx[ok, col]
+        rel = np.einsum("npi,ni->np", axes[j], pts[ok] - centres[j])
+        out[np.flatnonzero(ok)[np.all(np.abs(rel) <= 0.5 * a, axis=1)]] = True
+    return out
+
+
+def plane_violations(state, tol=1e-9):
+    """Largest excess (m) of a member ball centre beyond its aggregate's planes or sphere.
+
+    0 (or below ``tol`` x spacing) when every member centre satisfies the six plane
+    inequalities |n_p . (x - c)| <= d_p / 2 and lies inside the seed sphere.
+    """
+    ag = state.groups["aggregates"]
+    body = np.asarray(ag["body"], np.int64)
+    agg_of_body = np.full(len(state["bodies/mass"]), -1, np.int64)
+    agg_of_body[body] = np.arange(len(body))
+    sb = np.asarray(state["spheres/body"], np.int64)
+    mine = agg_of_body[sb] >= 0
+    k = agg_of_body[sb[mine]]
+    off = np.asarray(state["spheres/offset"])[mine]
+    d = off - np.asarray(ag["seed_offset"])[k]
+    proj = np.abs(np.einsum("ij,ipj->ip", d, np.asarray(ag["plane_normal"])[k]))
+    slab = proj - 0.5 * np.asarray(ag["plane_spacing"])[k]
+    sphere = np.linalg.norm(d, axis=1) - np.asarray(ag["seed_radius"])[k]
+    if len(k) == 0:
+        return 0.0
+    return float(max(slab.max(), sphere.max()))
+
+
+def phase_of_spheres(state):
+    """Aggregate index of each sphere (-1 for spheres of other bodies, e.g. mastic)."""
+    ag = state.groups.get("aggregates")
+    nb = len(state["bodies/mass"])
+    agg_of_body = np.full(nb, -1, np.int64)
+    if ag is not None:
+        agg_of_body[np.asarray(ag["body"], np.int64)] = np.arange(len(ag["body"]))
+    return agg_of_body[np.asarray(state["spheres/body"], np.int64)]
+
+
+def write_asphalt_vtu(path, state):
+    """Spheres as a VTU with the usual point data plus ``aggregate`` (index, -1 for mastic),
+    ``size_class`` (sieve class, -1 for mastic and fines), ``seed_class`` and ``phase``
+    (0 aggregate, 1 mastic). In ParaView: Glyph (Sphere, scale by diameter), colour by
+    ``phase``, ``aggregate`` or ``size_class``."""
+    import meshio
+
+    from demcli.state.atomic import atomic_path
+    from demcli.state.vtu import sphere_mesh
+
+    mesh = sphere_mesh(state)
+    agg = phase_of_spheres(state)
+    ag = state.groups.get("aggregates", {})
+    size_class = np.asarray(ag.get("size_class", np.zeros(0, np.int64)), np.int64)
+    seed_class = np.asarray(ag.get("seed_class", np.zeros(0, np.int64)), np.int64)
+    has = agg >= 0
+    mesh.point_data["aggregate"] = agg
+    mesh.point_data["size_class"] = np.where(has, size_class[np.maximum(agg, 0)] if len(size_class) else -1, -1)
+    mesh.point_data["seed_class"] = np.where(has, seed_class[np.maximum(agg, 0)] if len(seed_class) else -1, -1)
+    mesh.point_data["phase"] = np.where(has, 0, 1).astype(np.int64)
+    path = __import__("pathlib").Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with atomic_path(path) as tmp:
+        meshio.write(tmp, mesh, file_format="vtu", binary=True, compression="zlib")
+    return path
+
+
+def solid_volume(state):
+    """Total aggregate volume (m^3) of the state's ``aggregates`` group."""
+    ag = state.groups.get("aggregates")
+    return float(np.sum(ag["volume"])) if ag is not None else 0.0
+
+
+def box_of_walls(state_or_groups):
+    """(lo (3,), hi (3,)) of axis-aligned plane walls in a state (None when there are none)."""
+    groups = state_or_groups.groups if hasattr(state_or_groups, "groups") else state_or_groups
+    w = groups.get("walls")
+    if not w or len(w.get("kind", [])) == 0:
+        return None
+    lo = np.full(3, -math.inf)
+    hi = np.full(3, math.inf)
+    for k in range(len(w["kind"])):
+        if int(w["kind"][k]) != 0:
+            continue
+        n = np.asarray(w["normal"][k], float)
+        d = int(np.argmax(np.abs(n)))
+        if abs(abs(n[d]) - 1.0) > 1e-9:
+            continue
+        p = float(w["point"][k][d])
+        if n[d] > 0:
+            lo[d] = max(lo[d], p)
+        else:
+            hi[d] = min(hi[d], p)
+    if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))):
+        return None
+    return lo, hi

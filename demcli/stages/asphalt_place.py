@@ -1,0 +1,148 @@
+"""``place_spheres`` stage: seed spheres by gradation, placed without overlap (seed 000, step 1).
+
+Reads the previous stage's ``gradation`` group (class bounds and mass shares of the
+aggregate retained on the smallest modelled sieve) and places spheres in a box by
+random sequential addition (largest first, uniform-grid broad phase,
+``demcli.geometry.carving.place_spheres``). Diameters are uniform within each class.
+The amount is either
+
+* ``target: {kind: count, count: N}``: N spheres split over the classes so that the
+  class volumes follow the shares, n_c = N (P_c / v_c) / sum(P / v), with v_c the mean
+  sphere volume of class c (uniform diameters: pi/6 (D_hi^4 - D_lo^4) / (4 (D_hi - D_lo)));
+* ``target: {kind: porosity, porosity: p}``: spheres drawn per class until the class
+  volume P_c (1 - p) V reaches its share of the solids (V the box volume).
+
+The seed paper keeps each sphere's centre, radius and material and deletes the spheres;
+so does this stage: the output has no bodies, only the ``seeds`` group (plus the
+``gradation`` group, passed on) and ``records/seeds`` (per class: target and placed
+volume and count). Random sequential addition jams near a solid fraction of 0.5 for
+these size spreads; a target beyond what it reaches stops the stage with the
+fraction placed.
+"""
+
+import math
+
+import numpy as np
+
+from demcli.config.schema import Float, Int, Section, Str, Tagged, Vector
+from demcli.errors import InputError, StageError
+from demcli.stages import asphalt_common  # noqa: F401  (registers the seeds and aggregates groups)
+from demcli.stages.base import StageType, register_stage
+
+REGION = Section({"min": Vector(3, "m", doc="lower corner"), "max": Vector(3, "m", doc="upper corner")},
+                 doc="box the spheres are placed in (the carving region)")
+
+FIELDS = {
+    "region": REGION,
+    "target": Tagged("kind", {
+        "count": Section({"count": Int(min=1, doc="number of spheres over all classes")}),
+        "porosity": Section({"porosity": Float(min=0, max=1, min_inclusive=False, max_inclusive=False,
+                                               doc="1 - sphere volume / box volume")}),
+    }, doc="how many spheres: a count, or the porosity of the sphere packing"),
+    "material": Str(doc="material of the aggregates carved from the spheres"),
+    "gap": Float("m", min=0, default=0.0, doc="clearance between spheres"),
+    "max_tries": Int(min=100, default=20000, doc="failed candidates in a row before placement gives up"),
+}
+
+
+def _check(node, report):
+    for d in range(3):
+        if node.region.max[d] <= node.region.min[d]:
+            report(f"region.max.{d}", f"must be > region.min ({node.region.min[d]:g} m)", node.region.max[d])
+
+
+def class_counts(share, lower, upper, total):
+    """Sphere counts per class for ``total`` spheres whose class volumes follow ``share``."""
+    from demcli.geometry.carving import mean_sphere_volume
+
+    w = np.asarray(share, float) / mean_sphere_volume(lower, upper)
+    raw = total * w / w.sum()
+    n = np.floor(raw).astype(np.int64)
+    rest = int(total - n.sum())
+    if rest > 0:  # largest remainders
+        n[np.argsort(-(raw - n), kind="stable")[:rest]] += 1
+    return n
+
+
+def draw_seeds(rng, cfg, lower, upper, share):
+    """Diameters and classes of the spheres to place (see the module doc)."""
+    from demcli.geometry.carving import diameters_for_volume, draw_diameters
+
+    lo, hi = np.array(cfg.region.min), np.array(cfg.region.max)
+    volume = float(np.prod(hi - lo))
+    diam, cls = [], []
+    if cfg.target.kind == "count":
+        counts = class_counts(share, lower, upper, cfg.target.count)
+        for c, n in enumerate(counts):
+            diam.append(draw_diameters(rng, lower[c], upper[c], int(n)))
+            cls.append(np.full(int(n), c, np.int64))
+    else:
+        solids = (1.0 - cfg.target.porosity) * volume
+        for c in range(len(lower)):
+            d = diameters_for_volume(rng, lower[c], upper[c], share[c] / 100.0 * solids) if share[c] > 0 \
+                else np.zeros(0)
+            diam.append(d)
+            cls.append(np.full(len(d), c, np.int64))
+    return np.concatenate(diam), np.concatenate(cls), volume
+
+
+def run(ctx, cfg, state_in):
+    from demcli.geometry.carving import place_spheres
+    from demcli.state import RecordTable
+    from demcli.stages.asphalt_common import copy_group
+
+    if ctx.case.dimension != 3:
+        raise InputError(f"stage {ctx.name}: place_spheres builds 3D specimens; set dimension: 3")
+    g = state_in.groups["gradation"]
+    lower = np.asarray(g["class_lower"], float)
+    upper = np.asarray(g["class_upper"], float)
+    share = np.asarray(g["class_share"], float)
+    lo, hi = np.array(cfg.region.min), np.array(cfg.region.max)
+    if upper.max() > (hi - lo).min():
+        raise InputError(f"stage {ctx.name}: the largest class ({upper.max() * 1e3:g} mm) does not fit the region "
+                         f"({(hi - lo).min() * 1e3:g} mm across)")
+    diam, cls, volume = draw_seeds(ctx.rng, cfg, lower, upper, share)
+    pos, placed = place_spheres(ctx.rng, lo, hi, 0.5 * diam, gap=cfg.gap, max_tries=cfg.max_tries)
+    if placed < len(diam):
+        sf = np.sum(diam[~np.isnan(pos[:, 0])] ** 3) * math.pi / 6 / volume
+        want = np.sum(diam ** 3) * math.pi / 6 / volume
+        raise StageError(f"stage {ctx.name}: placed {placed} of {len(diam)} spheres (solid fraction {sf:.3f} of "
+                         f"{want:.3f}) before {cfg.max_tries} candidates in a row failed; random sequential addition "
+                         "jams near 0.5 for these sizes: raise target.porosity or lower target.count")
+    mat = list(ctx.case.materials).index(cfg.material)
+    n = len(diam)
+    state = ctx.new_state()
+    from demcli.stages.gradation import _empty_bodies, _empty_spheres
+
+    state.groups["bodies"] = _empty_bodies()
+    state.groups["spheres"] = _empty_spheres()
+    state.groups["gradation"] = copy_group(state_in, "gradation")
+    state.groups["seeds"] = {"centre": pos, "radius": 0.5 * diam, "class": cls,
+                             "material": np.full(n, mat, np.int64), "status": np.zeros(n, np.int8),
+                             "round": np.zeros(n, np.int64), "region": np.r_[lo, hi]}
+    table = RecordTable("seeds", {"lower": "mm", "upper": "mm", "share": "%", "count": "1", "volume": "m^3",
+                                  "volume_share": "%"})
+    vol = math.pi / 6 * diam ** 3
+    for c in range(len(lower)):
+        table.append(lower=lower[c] * 1e3, upper=upper[c] * 1e3, share=share[c], count=int(np.sum(cls == c)),
+                     volume=float(vol[cls == c].sum()), volume_share=100 * float(vol[cls == c].sum() / vol.sum()))
+    table.to_state(state)
+    ctx.write_records(table, x="upper", ys=["share", "volume_share"])
+    ctx.log(f"{n} seed spheres ({', '.join(str(int(np.sum(cls == c))) for c in range(len(lower)))} per class) "
+            f"placed in {(hi - lo)[0] * 1e3:g} x {(hi - lo)[1] * 1e3:g} x {(hi - lo)[2] * 1e3:g} mm; "
+            f"sphere porosity {1 - vol.sum() / volume:.4f}")
+    return state
+
+
+def describe(cfg, case):
+    lo, hi = np.array(cfg.region.min), np.array(cfg.region.max)
+    size = " x ".join(f"{v * 1e3:g}" for v in hi - lo)
+    t = cfg.target
+    amount = f"{t.count} spheres" if t.kind == "count" else f"sphere porosity {t.porosity:g}"
+    return f"{amount} in a {size} mm box, material {cfg.material}"
+
+
+register_stage(StageType(
+    "place_spheres", FIELDS, run, check=_check, describe=describe,
+    requires=("gradation/class_lower", "gradation/class_upper", "gradation/class_share"),
+    doc="seed spheres drawn by gradation and placed without overlap (seed 000, carving seeds)"))

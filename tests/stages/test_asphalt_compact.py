@@ -1,0 +1,96 @@
+"""3D asphalt (seed 000): servo-wall compaction of carved aggregates, porosity against time."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from demcli import run_case
+from demcli.errors import ConfigError, InputError
+from demcli.state import read_state
+
+CASES = Path(__file__).resolve().parents[2] / "cases"
+SMOKE = CASES / "smoke" / "asphalt_carved_cube.yaml"
+
+
+@pytest.fixture(scope="session")
+def smoke_run(tmp_path_factory):
+    """The smoke pipeline, run once per session (other asphalt test modules reuse the folder)."""
+    out = tmp_path_factory.getbasetemp() / "asphalt_carved_cube_smoke"
+    run_case(SMOKE, out=out, quiet=True, threads=1)
+    return out
+
+
+def _case(tmp_path, n, edit):
+    data = yaml.safe_load(SMOKE.read_text())
+    data["stages"] = data["stages"][:n]
+    edit(data["stages"])
+    path = tmp_path / "case.yaml"
+    path.write_text(yaml.safe_dump(data))
+    return path
+
+
+def test_servo_walls_reach_the_target_stress_and_porosity_is_recorded(smoke_run):
+    st = read_state(smoke_run / "03-compact.h5")
+    rec = st.groups["records/dem"]
+    comp = st.groups["compaction"]
+    # Then the stage stopped at the servo stress: each servo face's stress (its force over its
+    # current area), averaged over the last 10 records, is within 3 % of 0.1 MPa
+    assert "servo stress" in str(comp["stopped"])
+    for face in ("x1", "y1", "z1"):
+        assert np.mean(rec[f"stress_{face}"][-10:]) == pytest.approx(1e5, rel=0.03)
+    for ax in "xyz":  # frictionless walls: the opposite faces carry it too
+        assert np.mean(rec[f"stress_{ax}"][-10:]) == pytest.approx(1e5, rel=0.05)
+    # and the porosity fell from the loose carving to a dense skeleton
+    p = rec["porosity"]
+    assert p[0] == pytest.approx(float(comp["porosity_initial"])) and p[0] > 0.8
+    assert float(comp["porosity_final"]) < 0.55 and p[-1] == pytest.approx(float(comp["porosity_final"]))
+    assert np.all(np.diff(p) <= 1e-3)  # walls close in; the box never grows noticeably
+    # and it is 1 - solid volume / box volume, the box read off the walls
+    box = comp["box"]
+    vol = np.prod(box[3:] - box[:3])
+    assert float(comp["porosity_final"]) == pytest.approx(1 - st["aggregates/volume"].sum() / vol, rel=1e-12)
+    assert np.allclose(box[3:] - box[:3], [st["walls/point"][k][d] for k, d in ((1, 0), (3, 1), (5, 2))]
+                       - box[:3])
+    # and porosity against time is written as CSV and PNG
+    csv = smoke_run / "records" / "compact_dem.csv"
+    head = csv.read_text().splitlines()[0]
+    assert "time[s]" in head and "porosity" in head and "stress_z1[Pa]" in head
+    assert (smoke_run / "records" / "compact_dem_porosity.png").stat().st_size > 1000
+    # and every sphere is inside the final box (up to small overlaps)
+    c = st.sphere_centres()
+    r = st["spheres/radius"]
+    assert np.all(c - r[:, None] > box[:3] - 0.1 * r[:, None]) and np.all(c + r[:, None] < box[3:] + 0.1 * r[:, None])
+
+
+def test_compaction_stops_at_a_target_porosity(tmp_path):
+    # Given the smoke case with a lid at constant speed and a porosity target
+    def edit(stages):
+        stages[3]["walls"][0]["motion"] = {"z1": {"mode": "velocity", "velocity": [0, 0, "-0.5 m/s"]}}
+        stages[3]["target"] = {"porosity": 0.75}
+
+    run_case(_case(tmp_path, 4, edit), out=tmp_path / "run", quiet=True, threads=1)
+    st = read_state(tmp_path / "run" / "03-compact.h5")
+    p = st.groups["records/dem"]["porosity"]
+    # Then it stopped at the first record below 0.75, long before the end of time
+    assert "target porosity" in str(st["compaction/stopped"])
+    assert p[-1] <= 0.75 < p[-2]
+    assert st.meta["time"] < 0.5 * 0.2
+
+
+def test_compact_needs_one_closed_box_and_the_aggregates_inside(tmp_path):
+    from demcli.config.case import load_case
+
+    def open_box(stages):
+        stages[3]["walls"][0]["open"] = ["z1"]
+        stages[3]["walls"][0]["motion"] = {}
+
+    with pytest.raises(ConfigError, match="the box must be closed"):
+        load_case(_case(tmp_path, 4, open_box))
+
+    def small_box(stages):
+        stages[3]["walls"][0]["max"] = ["20 mm", "30 mm", "30 mm"]
+
+    with pytest.raises(InputError, match="stick out of the box"):
+        run_case(_case(tmp_path, 4, small_box), out=tmp_path / "run", quiet=True, threads=1)
