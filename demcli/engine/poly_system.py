@@ -23,6 +23,7 @@ import math
 import numpy as np
 
 from demcli.engine.materials import damping_ratio
+from demcli.engine.system import BodySystem
 from demcli.kernels import layout as K
 from demcli.kernels.walls import PLANE
 
@@ -136,7 +137,7 @@ def polyhedra_groups(polys, density, x=None, q=None, v=None, omega=None, materia
     return {"bodies": bodies, "spheres": spheres, "polyhedra": polyhedra, "polyhedron_shapes": table.to_group()}
 
 
-class PolySystem:
+class PolySystem(BodySystem):
     """Arrays and kernels of one stage whose bodies are rigid convex polyhedra.
 
     Args:
@@ -379,15 +380,6 @@ class PolySystem:
         return int(status), int(done)
 
     # ---- measures -------------------------------------------------------------------
-    def kinetic_energy(self):
-        """Translational plus rotational kinetic energy [J] (fixed summation order)."""
-        ke = 0.5 * float(np.sum(self.mass * np.einsum("ij,ij->i", self.v, self.v)))
-        return ke + 0.5 * float(np.sum(np.einsum("ij,ij->i", self.w, self.L)))
-
-    def gravity_potential(self):
-        """-sum m g.x [J] (zero at the origin)."""
-        return -float(np.sum(self.mass * (self.x @ self.gravity))) if self.plan.has("gravity") else 0.0
-
     def strain_energy(self):
         """Elastic energy of the contacts [J], estimated: the volumetric law has no
         potential in general (see :func:`demcli.kernels.poly_step.strain_energy_estimate`);
@@ -398,26 +390,6 @@ class PolySystem:
         return float(strain_energy_estimate(nl[P_ACT], nl[P_GEO], nl[P_FT], nl[P_WGEO], nl[P_WFT],
                                             self.plan.has("friction")))
 
-    def losses(self):
-        """Cumulative energy [J]: contact dashpots, slip, body damping (local, viscous,
-        adaptive), and work done by walls."""
-        d = dict(self.losses0)
-        if self.plan.has("energy"):
-            d["damping"] += float(self.esph[:, 0].sum())
-            d["friction"] += float(self.esph[:, 1].sum())
-            d["body_damping"] += float(self.ebody.sum())
-            d["wall_work"] += float(self.eacc[0])
-        return d
-
-    def energy_record(self):
-        """Energy terms and the balance error E_k + E_s + E_g + losses - wall work [J]."""
-        rec = {"kinetic": self.kinetic_energy(), "strain": self.strain_energy(),
-               "gravity": self.gravity_potential()}
-        rec.update(self.losses())
-        rec["total"] = (rec["kinetic"] + rec["strain"] + rec["gravity"] + rec["damping"] + rec["friction"]
-                        + rec["body_damping"] - rec["wall_work"])
-        return rec
-
     def contact_count(self):
         """(body-body contacts, body-wall contacts) touching at the last evaluation."""
         from demcli.kernels.poly_step import P_ACT, P_WGEO
@@ -427,23 +399,10 @@ class PolySystem:
         return int(nl[P_ACT].sum()), int(np.count_nonzero(wgeo[:, 0] > 0.0)) if len(wgeo) else 0
 
     # ---- state exchange -------------------------------------------------------------
+    rotation_from_angmom = True  # polyhedra have general inertia tensors
+
     _MUTABLE = ("x", "v", "w", "q", "L", "f", "tq", "wpoint", "wv", "wforce", "esph", "ebody", "eacc", "adamp",
                 "nl", "time", "step")
-
-    def snapshot(self):
-        """Copies of everything the step loop mutates (to restore the last good state)."""
-        return {k: (tuple(a.copy() for a in getattr(self, k)) if k == "nl" else
-                    getattr(self, k).copy() if isinstance(getattr(self, k), np.ndarray) else getattr(self, k))
-                for k in self._MUTABLE}
-
-    def restore(self, snap):
-        for k, val in snap.items():
-            cur = getattr(self, k)
-            if isinstance(cur, np.ndarray):
-                cur[...] = val
-            else:
-                setattr(self, k, val)
-        self._fresh_lists = True
 
     def groups(self):
         """State groups of the current scene.

@@ -53,7 +53,70 @@ class Dynamics:
     energy_limit: float = 1e3      # kinetic energy may not exceed this times the reference energy
 
 
-class System:
+class BodySystem:
+    """What every engine (spheres and clumps, polyhedra) shares: energy measures and snapshots.
+
+    Subclasses provide the arrays (x, v, w, L, mass, inert, ...), ``plan``, ``gravity``, the
+    loss accumulators (losses0, esph, ebody, eacc), ``strain_energy()`` and ``_MUTABLE``:
+    the attributes the step loop changes.
+    """
+
+    _MUTABLE = ()
+
+    @property
+    def rotation_from_angmom(self):
+        """Bodies with a general inertia tensor: rotational energy omega.L / 2."""
+        return self.clumps
+
+    def kinetic_energy(self):
+        """Translational plus rotational kinetic energy [J] (fixed summation order)."""
+        ke = 0.5 * float(np.sum(self.mass * np.einsum("ij,ij->i", self.v, self.v)))
+        if self.rotation_from_angmom:
+            ke += 0.5 * float(np.sum(np.einsum("ij,ij->i", self.w, self.L)))
+        else:
+            ke += 0.5 * float(np.sum(self.inert[:, 0] * np.einsum("ij,ij->i", self.w, self.w)))
+        return ke
+
+    def gravity_potential(self):
+        """-sum m g.x [J] (zero at the origin)."""
+        return -float(np.sum(self.mass * (self.x @ self.gravity))) if self.plan.has("gravity") else 0.0
+
+    def losses(self):
+        """Cumulative energy [J]: contact dashpots, slip, body damping, and work done by walls."""
+        d = dict(self.losses0)
+        if self.plan.has("energy"):
+            d["damping"] += float(self.esph[:, 0].sum())
+            d["friction"] += float(self.esph[:, 1].sum())
+            d["body_damping"] += float(self.ebody.sum())
+            d["wall_work"] += float(self.eacc[0])
+        return d
+
+    def energy_record(self):
+        """Energy terms and the balance error E_k + E_s + E_g + losses - wall work [J]."""
+        rec = {"kinetic": self.kinetic_energy(), "strain": self.strain_energy(),
+               "gravity": self.gravity_potential()}
+        rec.update(self.losses())
+        rec["total"] = (rec["kinetic"] + rec["strain"] + rec["gravity"] + rec["damping"] + rec["friction"]
+                        + rec["body_damping"] - rec["wall_work"])
+        return rec
+
+    def snapshot(self):
+        """Copies of everything the step loop mutates (to restore the last good state)."""
+        return {k: (tuple(a.copy() for a in getattr(self, k)) if k == "nl" else
+                    getattr(self, k).copy() if isinstance(getattr(self, k), np.ndarray) else getattr(self, k))
+                for k in self._MUTABLE}
+
+    def restore(self, snap):
+        for k, val in snap.items():
+            cur = getattr(self, k)
+            if isinstance(cur, np.ndarray):
+                cur[...] = val
+            else:
+                setattr(self, k, val)
+        self._fresh_lists = True
+
+
+class System(BodySystem):
     """Arrays and kernels of one stage.
 
     Args:
@@ -214,18 +277,8 @@ class System:
         return int(status), int(done)
 
     # ---- measures -------------------------------------------------------------------
-    def kinetic_energy(self):
-        """Translational plus rotational kinetic energy [J] (fixed summation order)."""
-        ke = 0.5 * float(np.sum(self.mass * np.einsum("ij,ij->i", self.v, self.v)))
-        if self.clumps:
-            ke += 0.5 * float(np.sum(np.einsum("ij,ij->i", self.w, self.L)))
-        else:
-            ke += 0.5 * float(np.sum(self.inert[:, 0] * np.einsum("ij,ij->i", self.w, self.w)))
-        return ke
-
-    def gravity_potential(self):
-        """-sum m g.x [J] (zero at the origin)."""
-        return -float(np.sum(self.mass * (self.x @ self.gravity))) if self.plan.has("gravity") else 0.0
+    _MUTABLE = ("x", "v", "w", "q", "L", "f", "tq", "xs", "vs", "ws", "fs", "ts", "wpoint", "wv", "wforce", "esph",
+                "ebody", "eacc", "nl", "time", "step")
 
     def strain_energy(self):
         from demcli.kernels.step import total_strain_energy
@@ -237,25 +290,6 @@ class System:
             self.flags[K.F_FRICTION], self.flags[K.F_ROLLING], nl[K.NL_WSTART], nl[K.NL_WWALL], w.kind, self.wpoint,
             w.normal, w.radius, w.material, nl[K.NL_WFT], nl[K.NL_WMR]))
 
-    def losses(self):
-        """Cumulative energy [J]: contact dashpots, slip, body damping, and work done by walls."""
-        d = dict(self.losses0)
-        if self.plan.has("energy"):
-            d["damping"] += float(self.esph[:, 0].sum())
-            d["friction"] += float(self.esph[:, 1].sum())
-            d["body_damping"] += float(self.ebody.sum())
-            d["wall_work"] += float(self.eacc[0])
-        return d
-
-    def energy_record(self):
-        """Energy terms and the balance error E_k + E_s + E_g + losses - wall work [J]."""
-        rec = {"kinetic": self.kinetic_energy(), "strain": self.strain_energy(),
-               "gravity": self.gravity_potential()}
-        rec.update(self.losses())
-        rec["total"] = (rec["kinetic"] + rec["strain"] + rec["gravity"] + rec["damping"] + rec["friction"]
-                        + rec["body_damping"] - rec["wall_work"])
-        return rec
-
     def contact_count(self):
         """(sphere-sphere contacts, sphere-wall contacts) touching now."""
         nl = self.nl
@@ -265,22 +299,6 @@ class System:
         return n_pp, n_pw
 
     # ---- state exchange -------------------------------------------------------------
-    def snapshot(self):
-        """Copies of everything the step loop mutates (to restore the last good state)."""
-        return {k: (tuple(a.copy() for a in getattr(self, k)) if k == "nl" else
-                    getattr(self, k).copy() if isinstance(getattr(self, k), np.ndarray) else getattr(self, k))
-                for k in ("x", "v", "w", "q", "L", "f", "tq", "xs", "vs", "ws", "fs", "ts", "wpoint", "wv",
-                          "wforce", "esph", "ebody", "eacc", "nl", "time", "step")}
-
-    def restore(self, snap):
-        for k, val in snap.items():
-            cur = getattr(self, k)
-            if isinstance(cur, np.ndarray):
-                cur[...] = val
-            else:
-                setattr(self, k, val)
-        self._fresh_lists = True
-
     def groups(self):
         """State groups of the current scene (bodies, spheres, contacts, walls, energy)."""
         nl = self.nl

@@ -66,7 +66,7 @@ from demcli.kernels.layout import (BAD_ENERGY, BAD_NUMBER, BAD_OVERLAP, C_BODY, 
                                    C_WALLCTRL, C_WALLMOVE, FIX_ROTATION, FIX_TRANSLATION, OK)
 from demcli.kernels.neighbors import build_pairs, build_reverse, build_wall_pairs, carry_history
 from demcli.kernels.polyhedra import contact_frame, overlap, plane_overlap, to_world_planes, to_world_vertices
-from demcli.kernels.step import _body_loads, _omega_from_L, _rotate_rigid, _wall_control
+from demcli.kernels.step import _body_loads, _omega_from_L, _rotate_rigid, _wall_control, move_walls
 
 # columns of the material-pair table prm[a, b, :]
 Q_KN = 0      # k_n = 4 E / (3 sqrt(pi)) [Pa]
@@ -632,12 +632,7 @@ def run_poly_steps(nsteps, time, dt, sw, prm, gravity, local, visc, adamp,
             _kick_drift(x, v, w, q, L, f, tq, mass, inert, bflags, dt, alpha, ztq, xref, lim2, rebuild, eabs)
             counters[C_KICK] += 1
             if nw > 0:
-                for k in range(nw):
-                    for d in range(3):
-                        wpoint[k, d] += wv[k, d] * dt
-                        wref[k, d] += wv[k, d] * dt
-                    if wref[k, 0] ** 2 + wref[k, 1] ** 2 + wref[k, 2] ** 2 > lim2:
-                        rebuild[0] = 1
+                move_walls(wpoint, wref, wv, dt, lim2, rebuild)
                 counters[C_WALLMOVE] += 1
         if rebuild[0]:
             rebuild[0] = 0

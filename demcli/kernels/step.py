@@ -498,6 +498,18 @@ def _clump_loads(mstart, mlist, xs, fs_s, ts_s, x, v, w, q, L, f, tq, mass, iner
             w[b, 2] = wz
 
 
+@njit(inline="always")
+def move_walls(wpoint, wref, wv, dt, lim2, rebuild):
+    """Walls translate by v dt; one that moved more than skin/2 since the last list build
+    flags a rebuild (wref: displacement since then)."""
+    for k in range(wv.shape[0]):
+        for d in range(3):
+            wpoint[k, d] += wv[k, d] * dt
+            wref[k, d] += wv[k, d] * dt
+        if wref[k, 0] ** 2 + wref[k, 1] ** 2 + wref[k, 2] ** 2 > lim2:
+            rebuild[0] = 1
+
+
 @njit
 def _mark_history(act, ft, mr, friction, rolling):
     """Flag carried pairs with history as active, so the pair pass clears it if they opened."""
@@ -653,12 +665,7 @@ def run_steps(nsteps, time, dt, law, flags, prm, gravity, local, visc,
             _place_members(x, v, w, q, xs, vs, ws, sbody, soff, xref, lim2, rebuild)
             counters[C_MEMBERS] += 1
         if nw > 0 and not prime:
-            for k in range(nw):
-                for d in range(3):
-                    wpoint[k, d] += wv[k, d] * dt
-                    wref[k, d] += wv[k, d] * dt
-                if wref[k, 0] ** 2 + wref[k, 1] ** 2 + wref[k, 2] ** 2 > lim2:
-                    rebuild[0] = 1
+            move_walls(wpoint, wref, wv, dt, lim2, rebuild)
             counters[C_WALLMOVE] += 1
         if rebuild[0]:
             rebuild[0] = 0
