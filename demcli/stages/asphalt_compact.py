@@ -19,8 +19,10 @@ default: the dem loop's servo slows down as soon as it touches a particle, by th
 k_n + c_n / dt it assumes, however loose the packing); at the first record where it
 carries half its target stress it becomes a servo with the speed limit
 ``target.settle_speed`` (default a tenth of ``max_speed``), so that the wall neither
-rams the packing nor chatters against it. ``approach: servo`` servo-controls from the
-start. A servo face without an explicit ``area`` loads the face's current area: the stage resets
+rams the packing nor chatters against it; when its stress, averaged over 3 records, falls
+below a quarter of the target (a force chain that formed and broke while the packing was
+still loose), it closes in at ``max_speed`` again. ``approach: servo`` servo-controls from
+the start. A servo face without an explicit ``area`` loads the face's current area: the stage resets
 it from the wall positions at every record (the dem loop takes the area of the initial
 box), so several faces can be servo-controlled at once, as in the seed, whose box shrank
 on all sides (120 mm cube to 110.4 x 86.3 x 109.7 mm).
@@ -59,6 +61,9 @@ for _name, _kind, _dims, _unit, _doc in [
     register(Field(f"compaction/{_name}", _kind, _dims, _unit, _doc, writer="stage compact"))
 
 FACES = dem.FACES
+SWITCH_UP = 0.5        # a face becomes a slow servo at this share of its target stress ...
+SWITCH_DOWN = 0.25     # ... and closes in again when its mean over the last records falls below this
+SWITCH_RECORDS = 3
 
 FIELDS = dict(dem.FIELDS)
 FIELDS["target"] = Section({
@@ -112,7 +117,10 @@ class Porosity:
         self.settle = {f: s if s is not None else 0.1 * box.motion[f].max_speed for f in self.servo}
         self.settling = set()
         self.history = []
-        if cfg.target.approach == "velocity":  # close in at max_speed; row() switches to servo
+        self.recent = []
+        self.vmax = {f: box.motion[f].max_speed for f in self.servo}
+        self.approach = cfg.target.approach == "velocity"
+        if self.approach:  # close in at max_speed; row() switches to servo
             from demcli.kernels.walls import VELOCITY
 
             for f in self.servo:
@@ -130,7 +138,7 @@ class Porosity:
         return float(-system.wforce[k] @ system.walls.normal[k])
 
     def row(self, system):
-        from demcli.kernels.walls import SERVO, W_AREA, W_VMAX
+        from demcli.kernels.walls import SERVO, VELOCITY, W_AREA, W_VMAX
 
         lo, hi = self.box(system)
         size = hi - lo
@@ -147,10 +155,22 @@ class Porosity:
             k = self.idx[face]
             if face in self.auto_area:  # the servo's loaded area follows the moving faces
                 system.walls.prm[k, W_AREA] = area
-            if face not in self.settling and out[f"stress_{face}"] >= 0.5 * self.servo[face]:
-                self.settling.add(face)  # close to the target: servo, slowly (no chatter)
-                system.walls.control[k] = SERVO
+            if self.approach:
+                recent = [h[f"stress_{face}"] for h in self.recent] + [out[f"stress_{face}"]]
+                mean = float(np.mean(recent[-SWITCH_RECORDS:]))
+                target = self.servo[face]
+                if face not in self.settling and out[f"stress_{face}"] >= SWITCH_UP * target:
+                    self.settling.add(face)  # close to the target: servo, slowly (no chatter)
+                    system.walls.control[k] = SERVO
+                    system.walls.prm[k, W_VMAX] = self.settle[face]
+                elif face in self.settling and len(recent) > SWITCH_RECORDS and mean < SWITCH_DOWN * target:
+                    self.settling.discard(face)  # that was a passing force chain: close in again
+                    system.walls.control[k] = VELOCITY
+                    system.wv[k] = self.vmax[face] * system.walls.normal[k]
+            elif face not in self.settling and out[f"stress_{face}"] >= SWITCH_UP * self.servo[face]:
+                self.settling.add(face)
                 system.walls.prm[k, W_VMAX] = min(system.walls.prm[k, W_VMAX], self.settle[face])
+        self.recent = (self.recent + [out])[-SWITCH_RECORDS:]
         return out
 
     def stop(self, system, row):
