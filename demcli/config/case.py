@@ -52,7 +52,7 @@ def case_schema():
     from demcli.stages.base import load_stage_types
 
     variants = {}
-    for name, st in load_stage_types().items():
+    for name, st in sorted(load_stage_types().items()):  # by name: independent of import order
         fields = {"name": Str(pattern=NAME, doc="stage name (unique; names the output files)")}
         fields.update(st.fields)
         variants[name] = Section(fields, doc=st.doc, check=st.check)

@@ -66,7 +66,7 @@ from demcli.kernels.layout import (BAD_ENERGY, BAD_NUMBER, BAD_OVERLAP, C_BODY, 
                                    C_WALLCTRL, C_WALLMOVE, FIX_ROTATION, FIX_TRANSLATION, OK)
 from demcli.kernels.neighbors import build_pairs, build_reverse, build_wall_pairs, carry_history
 from demcli.kernels.polyhedra import contact_frame, overlap, plane_overlap, to_world_planes, to_world_vertices
-from demcli.kernels.step import _body_loads, _omega_from_L, _rotate_rigid, _wall_control, move_walls
+from demcli.kernels.step import _body_loads, _drift, _omega_from_L, _rotate_rigid, _wall_control, move_walls
 
 # columns of the material-pair table prm[a, b, :]
 Q_KN = 0      # k_n = 4 E / (3 sqrt(pi)) [Pa]
@@ -185,14 +185,7 @@ def _kick_drift(x, v, w, q, L, f, tq, mass, inert, bflags, dt, alpha, ztq, xref,
             _rotate_rigid(b, w, q, L, ztq, inert, dt, False)  # ztq = 0: rotation only, L already kicked
             ea += 0.5 * (e0 + w[b, 0] * L[b, 0] + w[b, 1] * L[b, 1] + w[b, 2] * L[b, 2])
         eabs[b] = alpha * h * ea
-        x[b, 0] += v[b, 0] * dt
-        x[b, 1] += v[b, 1] * dt
-        x[b, 2] += v[b, 2] * dt
-        dx = x[b, 0] - xref[b, 0]
-        dy = x[b, 1] - xref[b, 1]
-        dz = x[b, 2] - xref[b, 2]
-        if dx * dx + dy * dy + dz * dz > lim2:
-            rebuild[0] = 1
+        _drift(x, v, b, dt, xref, lim2, rebuild)
 
 
 @njit(parallel=True)
