@@ -275,15 +275,6 @@ class PolySystem(BodySystem):
         self.ke_limit = math.inf
 
     # ---- set-up helpers -------------------------------------------------------------
-    def _angmom_from_omega(self):
-        """L = R diag(I) R^T omega for each body (world frame)."""
-        from scipy.spatial.transform import Rotation
-
-        if not len(self.q):
-            return np.zeros((0, 3))
-        rot = Rotation.from_quat(self.q[:, [1, 2, 3, 0]])  # scipy: scalar last
-        return np.ascontiguousarray(rot.apply(rot.inv().apply(self.w) * self.inert))
-
     def _initial_lists(self, groups):
         """Neighbour state seeded with the stored contacts (for history carry-over)."""
         nb = len(self.mass)

@@ -68,6 +68,14 @@ class BodySystem:
         """Bodies with a general inertia tensor: rotational energy omega.L / 2."""
         return self.clumps
 
+    def _angmom_from_omega(self):
+        """L = R diag(I) R^T omega for each body (world frame)."""
+        from scipy.spatial.transform import Rotation
+
+        rot = Rotation.from_quat(self.q[:, [1, 2, 3, 0]])  # scipy: scalar last
+        wb = rot.inv().apply(self.w)
+        return np.ascontiguousarray(rot.apply(wb * self.inert))
+
     def kinetic_energy(self):
         """Translational plus rotational kinetic energy [J] (fixed summation order)."""
         ke = 0.5 * float(np.sum(self.mass * np.einsum("ij,ij->i", self.v, self.v)))
@@ -204,14 +212,6 @@ class System(BodySystem):
         self.ke_limit = math.inf
 
     # ---- set-up helpers -------------------------------------------------------------
-    def _angmom_from_omega(self):
-        """L = R diag(I) R^T omega for each body (world frame)."""
-        from scipy.spatial.transform import Rotation
-
-        rot = Rotation.from_quat(self.q[:, [1, 2, 3, 0]])  # scipy: scalar last
-        wb = rot.inv().apply(self.w)
-        return np.ascontiguousarray(rot.apply(wb * self.inert))
-
     def _place_members(self):
         from scipy.spatial.transform import Rotation
 
