@@ -57,6 +57,21 @@ def info(state):
 
 
 @cli.command()
+@click.argument("runs", nargs=-1, required=True, type=click.Path(file_okay=False, exists=True))
+@click.option("--record", help="Record file stem, e.g. vibrate_cycles (default: the seed-002 figures).")
+@click.option("-x", "x", help="Column along x (default: the first).")
+@click.option("-y", "ys", multiple=True, help="Column(s) to plot (default: all others).")
+@click.option("--out", default="compare", show_default=True, type=click.Path(file_okay=False),
+              help="Folder for the PNG and CSV files.")
+def compare(runs, record, x, ys, out):
+    """Overlay a record of several RUNS (run folders) in one figure per column."""
+    from demcli.compare import compare as _compare
+
+    for path in _compare(runs, record=record, x=x, ys=ys, out=out):
+        click.echo(path)
+
+
+@cli.command()
 def warmup():
     """Compile (and cache) the engine kernels by running a tiny scene."""
     from demcli.check import warmup as _warmup

@@ -10,4 +10,4 @@ CASES = ROOT / "cases"
 
 @pytest.fixture
 def smoke_case():
-    return CASES / "smoke" / "quickstart.yaml"
+    return CASES / "smoke" / "beads.yaml"

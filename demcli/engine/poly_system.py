@@ -137,6 +137,31 @@ def polyhedra_groups(polys, density, x=None, q=None, v=None, omega=None, materia
     return {"bodies": bodies, "spheres": spheres, "polyhedra": polyhedra, "polyhedron_shapes": table.to_group()}
 
 
+def actor_loads(actors, nb):
+    """(bload (n_b, N_LOAD), nsmall) of the ``actors`` group (see docs/state.md).
+
+    Actors (loading plate, sleeper) must be the last bodies: the particles
+    0..nsmall-1 go through the cell grid, the actors are paired by
+    :func:`demcli.kernels.poly_step.add_actor_pairs`.
+    """
+    from demcli.kernels.poly_step import L_F0, L_F1, L_OMEGA, L_PHASE, L_T0, N_LOAD
+
+    bload = np.zeros((nb, N_LOAD))
+    body = np.asarray(actors.get("body", _EMPTY_I), np.int64)
+    if len(body) == 0:
+        return bload, nb
+    nsmall = int(body.min())
+    if sorted(body.tolist()) != list(range(nsmall, nb)):
+        raise ValueError(f"actors must be the last bodies of the scene; got bodies {body.tolist()} of {nb}")
+    for k, b in enumerate(body):
+        bload[b, L_F0:L_F0 + 3] = actors["load_mean"][k]
+        bload[b, L_F1:L_F1 + 3] = actors["load_amplitude"][k]
+        bload[b, L_OMEGA] = 2.0 * math.pi * float(actors["frequency"][k])
+        bload[b, L_PHASE] = float(actors["phase"][k])
+        bload[b, L_T0] = float(actors["start"][k])
+    return bload, nsmall
+
+
 class PolySystem(BodySystem):
     """Arrays and kernels of one stage whose bodies are rigid convex polyhedra.
 
@@ -156,6 +181,10 @@ class PolySystem(BodySystem):
         contact_damping, adaptive_damping: switch those effects on without a plan
             entry (None: from the plan).
         alpha0: initial adaptive alpha [1/s] (seed: 0.1).
+        mass_scale: mass scaling for quasi-static runs: masses and inertias are
+            multiplied by it inside the engine and gravity divided by it (weights stay
+            real, the critical step grows by its square root); ``groups()`` gives the
+            real masses back. A power of 2 keeps the round trip exact.
         alpha_bounds: (min, max) of alpha as multiples of alpha0 and of 1/dt:
             alpha in [alpha0 x min, max / dt]. The seed's rule is unbounded; the floor
             keeps alpha from decaying towards zero during a long quiet phase (0.99^n)
@@ -164,7 +193,8 @@ class PolySystem(BodySystem):
     """
 
     def __init__(self, groups, materials, model, plan, walls, dynamics, dt, time=0.0, step=0,
-                 contact_damping=None, adaptive_damping=None, alpha0=ALPHA0, alpha_bounds=(1e-3, 1.0)):
+                 contact_damping=None, adaptive_damping=None, alpha0=ALPHA0, alpha_bounds=(1e-3, 1.0),
+                 mass_scale=1.0):
         from demcli.kernels.poly_step import (A_ALPHA, A_KE, A_MAX, A_MIN, N_ADAMP, N_SWITCHES, S_ADAPTIVE,
                                               S_DASHPOT, S_ENERGY, S_FRICTION, S_GRAVITY, S_LOCAL, S_VISCOUS,
                                               S_WALLS)
@@ -200,13 +230,14 @@ class PolySystem(BodySystem):
         qn = np.linalg.norm(self.q, axis=1)
         off = np.abs(qn - 1.0) > 1e-12  # renormalize only what is off (a resumed state stays bit-exact)
         self.q[off] /= qn[off, None]
-        self.mass = np.ascontiguousarray(b["mass"], np.float64)
-        self.inert = np.ascontiguousarray(b["inertia"], np.float64)
+        self.mass_scale = float(mass_scale)
+        self.mass = np.ascontiguousarray(b["mass"], np.float64) * self.mass_scale
+        self.inert = np.ascontiguousarray(b["inertia"], np.float64) * self.mass_scale
         self.bflags = np.ascontiguousarray(b["flags"], np.int8)
         nb = len(self.mass)
         self.f = np.ascontiguousarray(b.get("force", np.zeros((nb, 3))), np.float64).copy()
         self.tq = np.ascontiguousarray(b.get("torque", np.zeros((nb, 3))), np.float64).copy()
-        self.L = (np.ascontiguousarray(b["angmom"], np.float64).copy() if "angmom" in b
+        self.L = (np.ascontiguousarray(b["angmom"], np.float64) * self.mass_scale if "angmom" in b
                   else self._angmom_from_omega())
         # shapes (body-frame CSR tables, used as they are) and per-body rows of the world arrays
         self.shape = np.ascontiguousarray(ph["shape"], np.int64)
@@ -227,6 +258,8 @@ class PolySystem(BodySystem):
         self.world = (np.zeros((int(self.bvstart[-1]), 3)), np.zeros((int(self.bfstart[-1]), 3)),
                       np.zeros(int(self.bfstart[-1])))
         self.rad = np.ascontiguousarray(np.asarray(sh["radius"], np.float64)[self.shape] * (1.0 + BOUND_PAD))
+        self._actors = {k: np.asarray(val) for k, val in groups.get("actors", {}).items()}
+        self.bload, self.nsmall = actor_loads(self._actors, nb)
         self.xs = self.x  # the dem stage measures the scene through xs (bodies are the particles here)
         # walls
         self.wforce = np.zeros((len(walls), 3))
@@ -271,7 +304,7 @@ class PolySystem(BodySystem):
         self.max_cells = max(64, 8 * nb)
         self._fresh_lists = True
         self.prime = True  # evaluate F(x_0) before the first step; False when resuming from stored loads
-        self.gravity = np.asarray(dynamics.gravity, np.float64)
+        self.gravity = np.asarray(dynamics.gravity, np.float64) / self.mass_scale
         self.ke_limit = math.inf
 
     # ---- set-up helpers -------------------------------------------------------------
@@ -364,11 +397,21 @@ class PolySystem(BodySystem):
             self.nl, self.skin, self.max_cells,
             self.esph, self.ebody, self.eacc,
             int(self.dyn.check_every), float(self.dyn.overlap_limit), float(self.ke_limit),
-            self.counters, self.info, self._fresh_lists, self.step, self.prime)
+            self.counters, self.info, self._fresh_lists, self.step, self.prime, self.bload, self.nsmall)
         self._fresh_lists = False
         self.prime = False
         self.step += int(done)
         return int(status), int(done)
+
+    def set_actor_start(self, name, t0):
+        """Start time [s] of the oscillating load of the actor ``name``."""
+        from demcli.kernels.poly_step import L_T0
+
+        names = [n.decode() if isinstance(n, bytes) else str(n) for n in self._actors["name"]]
+        k = names.index(name)
+        self._actors["start"] = self._actors["start"].astype(np.float64)
+        self._actors["start"][k] = t0
+        self.bload[int(self._actors["body"][k]), L_T0] = t0
 
     # ---- measures -------------------------------------------------------------------
     def strain_energy(self):
@@ -418,9 +461,9 @@ class PolySystem(BodySystem):
         if self.plan.has("friction"):
             wall_contacts["ft"] = nl[P_WFT][wact].copy()
         bodies = {"x": self.x.copy(), "v": self.v.copy(), "q": self.q.copy(), "omega": self.w.copy(),
-                  "mass": self.mass.copy(), "inertia": self.inert.copy(), "id": self.body_id.copy(),
-                  "flags": self.bflags.copy(), "force": self.f.copy(), "torque": self.tq.copy(),
-                  "angmom": self.L.copy()}
+                  "mass": self.mass / self.mass_scale, "inertia": self.inert / self.mass_scale,
+                  "id": self.body_id.copy(), "flags": self.bflags.copy(), "force": self.f.copy(),
+                  "torque": self.tq.copy(), "angmom": self.L / self.mass_scale}
         w = self.walls
         walls = {"name": np.array(w.name, dtype=object), "kind": np.asarray(w.kind).copy(),
                  "point": self.wpoint.copy(), "normal": np.asarray(w.normal).copy(),
@@ -432,6 +475,8 @@ class PolySystem(BodySystem):
                "polyhedra": {k: v.copy() for k, v in self._poly_group.items()},
                "polyhedron_shapes": {k: v.copy() for k, v in self._shape_group.items()},
                "body_contacts": contacts, "body_wall_contacts": wall_contacts, "walls": walls, "energy": energy}
+        if len(self._actors):
+            out["actors"] = {k: v.copy() for k, v in self._actors.items()}
         if self.adaptive_damping:
             out["adaptive_damping"] = {"alpha": np.float64(self.adamp[A_ALPHA]),
                                        "ke_prev": np.float64(self.adamp[A_KE])}

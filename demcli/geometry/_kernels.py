@@ -17,19 +17,32 @@ SQRT2 = math.sqrt(2.0)
 
 @njit
 def hull2d(pts):
-    """Convex hull of 2D points, Andrew's monotone chain (Andrew 1979).
+    """Convex hull of 2D points: Andrew's monotone chain (Andrew 1979) on exact turns,
+    then the round-off vertices dropped.
 
     pts: (n, 2) float64. Returns the int64 indices of the hull vertices in
-    counter-clockwise order, starting from the lexicographically smallest point.
-    Duplicate, collinear and nearly collinear points are dropped (a turn counts
-    only if its cross product exceeds 1e-12 extent^2), which removes round-off twins
-    such as the front and back corners of a box seen along an axis: every hull turn
-    is then strictly convex, as the rotating calipers need. Fewer than 3 distinct points
-    give the points found (length 1 or 2).
+    counter-clockwise order, starting from the lexicographically smallest one kept.
+    The chain decides each turn by the exact sign of the orientation determinant
+    (:func:`_turn`), so it builds the exact hull of the given floats, coincident, nearly
+    coincident and collinear points included. The tolerance comes after the chain, not
+    in it: in the chain a near-zero turn also arises where the middle point is far from
+    the other two (round-off twins that the lexicographic sort puts on either side of a
+    third point), and popping it there loses a true vertex. From the exact hull every
+    vertex within 1e-12 extent (pts' unit) of the segment joining its neighbours is
+    dropped (:func:`_prune_hull`): round-off twins, such as the front and back corners of
+    a box seen along an axis, and nearly collinear points. Every turn left is strictly
+    convex, as the rotating calipers need. Fewer than 3 points that far apart give 1 or
+    2 indices.
     """
-    n = pts.shape[0]
     ext = max(pts[:, 0].max() - pts[:, 0].min(), pts[:, 1].max() - pts[:, 1].min())
-    tol = 1e-12 * ext * ext
+    return _prune_hull(pts, _exact_chain(pts), 1e-12 * ext)
+
+
+@njit
+def _exact_chain(pts):
+    """Indices of the exact hull vertices of pts (n, 2), counter-clockwise from the
+    lexicographically smallest point; duplicate and collinear points are dropped."""
+    n = pts.shape[0]
     # lexicographic (x, then y) order from two stable sorts
     o1 = np.argsort(pts[:, 1], kind="mergesort")
     o2 = np.argsort(pts[o1, 0], kind="mergesort")
@@ -38,14 +51,14 @@ def hull2d(pts):
     k = 0
     for t in range(n):  # lower chain
         i = order[t]
-        while k >= 2 and _cross(pts, out[k - 2], out[k - 1], i) <= tol:
+        while k >= 2 and _turn(pts, out[k - 2], out[k - 1], i) <= 0.0:
             k -= 1
         out[k] = i
         k += 1
     lower = k + 1
     for t in range(n - 2, -1, -1):  # upper chain
         i = order[t]
-        while k >= lower and _cross(pts, out[k - 2], out[k - 1], i) <= tol:
+        while k >= lower and _turn(pts, out[k - 2], out[k - 1], i) <= 0.0:
             k -= 1
         out[k] = i
         k += 1
@@ -54,11 +67,140 @@ def hull2d(pts):
     return out[:k].copy()
 
 
+@njit
+def _prune_hull(pts, hull, delta):
+    """The vertices of a convex polygon that lie farther than delta from the segment
+    joining their neighbours (removing one rechecks its neighbours).
+
+    pts: (n, 2) float64; hull: indices of a convex polygon, counter-clockwise; delta: a
+    length in pts' unit. Two vertices within delta of each other become one. Returns the
+    kept indices, counter-clockwise from the lexicographically smallest.
+    """
+    h = hull.shape[0]
+    prv = np.empty(h, np.int64)
+    nxt = np.empty(h, np.int64)
+    for j in range(h):
+        prv[j] = (j - 1) % h
+        nxt[j] = (j + 1) % h
+    alive = np.ones(h, np.bool_)
+    todo = np.empty(3 * h, np.int64)  # h to start, 2 for each removal
+    todo[:h] = np.arange(h)
+    m = h
+    left = h
+    while m > 0 and left > 1:
+        m -= 1
+        j = todo[m]
+        if not alive[j]:
+            continue
+        a = hull[prv[j]]
+        c = hull[nxt[j]]
+        if left == 2:  # a segment: its ends are one point if within delta
+            far = math.hypot(pts[hull[j], 0] - pts[c, 0], pts[hull[j], 1] - pts[c, 1]) > delta
+        else:
+            far = _segment_distance(pts, hull[j], a, c) > delta
+        if not far:
+            alive[j] = False
+            left -= 1
+            nxt[prv[j]] = nxt[j]
+            prv[nxt[j]] = prv[j]
+            todo[m] = prv[j]
+            todo[m + 1] = nxt[j]
+            m += 2
+    kept = hull[alive]
+    first = 0
+    for j in range(1, kept.shape[0]):
+        p = pts[kept[j]]
+        q = pts[kept[first]]
+        if p[0] < q[0] or (p[0] == q[0] and p[1] < q[1]):
+            first = j
+    return np.concatenate((kept[first:], kept[:first]))
+
+
 @njit(inline="always")
-def _cross(pts, a, b, c):
-    """z of (b - a) x (c - a) for rows a, b, c of pts."""
-    return ((pts[b, 0] - pts[a, 0]) * (pts[c, 1] - pts[a, 1])
-            - (pts[b, 1] - pts[a, 1]) * (pts[c, 0] - pts[a, 0]))
+def _segment_distance(pts, v, a, c):
+    """Distance from row v of pts to the segment from row a to row c."""
+    ex = pts[c, 0] - pts[a, 0]
+    ey = pts[c, 1] - pts[a, 1]
+    dx = pts[v, 0] - pts[a, 0]
+    dy = pts[v, 1] - pts[a, 1]
+    ee = ex * ex + ey * ey
+    s = min(max((dx * ex + dy * ey) / ee, 0.0), 1.0) if ee > 0.0 else 0.0
+    return math.hypot(dx - s * ex, dy - s * ey)
+
+
+# Shewchuk's bound on the round-off of the orientation determinant in floating point
+# (Shewchuk 1997, "Adaptive precision floating-point arithmetic and fast robust geometric
+# predicates", Discrete Comput. Geom. 18, ccwerrboundA): (3 + 16 eps) eps, eps = 2^-53
+_EPS = 2.0 ** -53
+_TURN_BOUND = (3.0 + 16.0 * _EPS) * _EPS
+
+
+@njit(inline="always")
+def _turn(pts, a, b, c):
+    """A number of the exact sign of (b - a) x (c - a) for rows a, b, c of pts: > 0 for a
+    counter-clockwise turn, 0 when collinear.
+
+    The determinant in floating point where its sign is certain (Shewchuk's filter), else
+    the exact sign from :func:`_exact_turn`.
+    """
+    left = (pts[a, 0] - pts[c, 0]) * (pts[b, 1] - pts[c, 1])
+    right = (pts[a, 1] - pts[c, 1]) * (pts[b, 0] - pts[c, 0])
+    det = left - right
+    if abs(det) > _TURN_BOUND * (abs(left) + abs(right)):
+        return det
+    return _exact_turn(pts[a, 0], pts[a, 1], pts[b, 0], pts[b, 1], pts[c, 0], pts[c, 1])
+
+
+@njit
+def _exact_turn(ax, ay, bx, by, cx, cy):
+    """Exact sign (-1.0, 0.0 or 1.0) of ax by - ay bx + bx cy - by cx + cx ay - cy ax.
+
+    Each product is split into two floats that sum to it exactly (Dekker's two-product)
+    and the twelve are summed into a non-overlapping expansion (Shewchuk's
+    grow-expansion), whose sign is that of its largest non-zero component.
+    """
+    terms = np.empty(12)
+    terms[0], terms[1] = _two_product(ax, by)
+    terms[2], terms[3] = _two_product(-ay, bx)
+    terms[4], terms[5] = _two_product(bx, cy)
+    terms[6], terms[7] = _two_product(-by, cx)
+    terms[8], terms[9] = _two_product(cx, ay)
+    terms[10], terms[11] = _two_product(-cy, ax)
+    e = np.zeros(12)
+    for m in range(12):
+        q = terms[m]
+        for i in range(m):
+            q, e[i] = _two_sum(q, e[i])
+        e[m] = q
+    for i in range(11, -1, -1):
+        if e[i] != 0.0:
+            return 1.0 if e[i] > 0.0 else -1.0
+    return 0.0
+
+
+@njit(inline="always")
+def _two_sum(a, b):
+    """(s, err) with s = fl(a + b) and s + err = a + b exactly (Knuth)."""
+    s = a + b
+    bv = s - a
+    return s, (a - (s - bv)) + (b - bv)
+
+
+@njit(inline="always")
+def _two_product(a, b):
+    """(p, err) with p = fl(a b) and p + err = a b exactly (Dekker, Veltkamp's split)."""
+    p = a * b
+    ah, al = _split(a)
+    bh, bl = _split(b)
+    return p, al * bl - (((p - ah * bh) - al * bh) - ah * bl)
+
+
+@njit(inline="always")
+def _split(a):
+    """a = hi + lo with hi, lo of 26 significant bits each (Veltkamp)."""
+    c = 134217729.0 * a  # 2^27 + 1
+    hi = c - (c - a)
+    return hi, a - hi
 
 
 @njit(inline="always")

@@ -31,7 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from demcli.geometry._kernels import _basis, square_aperture
+from demcli.geometry._kernels import _basis, hull2d, square_aperture
 from demcli.jit import njit
 
 MASS_MODELS = ("cells", "balls")
@@ -135,7 +135,7 @@ def random_plane_normals(rng, n, angle_min):
     return np.stack([n1, n2, n3], axis=1)
 
 
-def draw_spacings(rng, diameters, longest, fe_share, fe_ratio, ratio_range):
+def draw_spacings(rng, diameters, longest, fe_share, fe_ratio, ratio_range, fe=None):
     """Full spacings (n, 3) of the three plane pairs, and which were drawn flat/elongated.
 
     diameters (n,): seed sphere diameters D (m). For each polyhedron:
@@ -147,12 +147,15 @@ def draw_spacings(rng, diameters, longest, fe_share, fe_ratio, ratio_range):
     * d_min = d_max / rho and the middle spacing uniform in [d_min, d_max];
     * the three spacings go to the three pairs in random order.
 
+    ``fe`` (n,) bool, when given, fixes which particles are flat/elongated instead of drawing
+    it (a seed cut again keeps its kind; ``fe_share`` is then unused).
+
     Returns (spacings (n, 3), drawn_fe (n,) bool, rho (n,)).
     """
     d = np.asarray(diameters, float)
     n = len(d)
     dmax = d * rng.uniform(longest[0], longest[1], n)
-    fe = rng.random(n) < fe_share
+    fe = rng.random(n) < fe_share if fe is None else np.asarray(fe, bool).copy()
     lo, hi = ratio_range
     rho = np.where(fe, rng.uniform(fe_ratio, hi, n), rng.uniform(lo, fe_ratio, n))
     dmin = dmax / rho
@@ -234,18 +237,18 @@ def polyhedron_widths(normals, spacings, radii):
     return out
 
 
-def shape_planes(rng, diameters, angle_min, longest, fe_share, fe_ratio, ratio_range):
+def shape_planes(rng, diameters, angle_min, longest, fe_share, fe_ratio, ratio_range, fe=None):
     """Normals (n, 3, 3) and spacings (n, 3) of the cutting planes of n seed spheres.
 
-    Spacings as :func:`draw_spacings`; then the thinnest pair is narrowed until the
-    polyhedron's own widths (:func:`polyhedron_widths`: a wide slab may not cut the
-    sphere at all, or only a cap) have the drawn ratio max / min, so that a particle drawn
-    flat/elongated is one, and one drawn regular is not. Returns (normals, spacings,
-    drawn_fe (n,), rho (n,), widths (n, 3)).
+    Spacings as :func:`draw_spacings` (``fe``: the kinds, when fixed); then the thinnest
+    pair is narrowed until the polyhedron's own widths (:func:`polyhedron_widths`: a wide
+    slab may not cut the sphere at all, or only a cap) have the drawn ratio max / min, so
+    that a particle drawn flat/elongated is one, and one drawn regular is not. Returns
+    (normals, spacings, drawn_fe (n,), rho (n,), widths (n, 3)).
     """
     d = np.asarray(diameters, float)
     normals = random_plane_normals(rng, len(d), angle_min)
-    sp, fe, rho = draw_spacings(rng, d, longest, fe_share, fe_ratio, ratio_range)
+    sp, fe, rho = draw_spacings(rng, d, longest, fe_share, fe_ratio, ratio_range, fe=fe)
     radii = 0.5 * d
     for _ in range(40):  # a fixed point: narrowing one pair can narrow the others' widths
         w = polyhedron_widths(normals, sp, radii)
@@ -417,44 +420,6 @@ def _aperture(length, width):
 
 
 @njit
-def _hull2d(pts):
-    """Convex hull of 2D points (Andrew's monotone chain), counter-clockwise, without
-    duplicate or collinear points (a turn must exceed 1e-12 extent^2). The points are
-    snapped (in place) to 1e-9 of their extent first: projected lattice clumps have many
-    points that coincide up to round-off, and a monotone chain sorted on such near-ties
-    can drop a hull vertex (:func:`demcli.geometry._kernels.hull2d` does), so the carving
-    uses this one."""
-    n = pts.shape[0]
-    ext = max(pts[:, 0].max() - pts[:, 0].min(), pts[:, 1].max() - pts[:, 1].min())
-    tol = 1e-12 * ext * ext
-    if ext > 0.0:  # snap to 1e-9 extent: round-off twins become exact ties of the sort
-        q = 1e-9 * ext
-        for j in range(n):
-            pts[j, 0] = round(pts[j, 0] / q) * q
-            pts[j, 1] = round(pts[j, 1] / q) * q
-    o1 = np.argsort(pts[:, 1], kind="mergesort")
-    order = o1[np.argsort(pts[o1, 0], kind="mergesort")]
-    out = np.empty(2 * n + 1, np.int64)
-    k = 0
-    for t in range(n):
-        i = order[t]
-        while k >= 2 and ((pts[out[k - 1], 0] - pts[out[k - 2], 0]) * (pts[i, 1] - pts[out[k - 2], 1])
-                          - (pts[out[k - 1], 1] - pts[out[k - 2], 1]) * (pts[i, 0] - pts[out[k - 2], 0])) <= tol:
-            k -= 1
-        out[k] = i
-        k += 1
-    low = k + 1
-    for t in range(n - 2, -1, -1):
-        i = order[t]
-        while k >= low and ((pts[out[k - 1], 0] - pts[out[k - 2], 0]) * (pts[i, 1] - pts[out[k - 2], 1])
-                            - (pts[out[k - 1], 1] - pts[out[k - 2], 1]) * (pts[i, 0] - pts[out[k - 2], 0])) <= tol:
-            k -= 1
-        out[k] = i
-        k += 1
-    return out[:max(k - 1, 1)]
-
-
-@njit
 def _grown_shadow_rectangle(vertices, dirs, r):
     """Least-area shadow of (hull of ``vertices``) + ball of radius r over directions ``dirs``.
 
@@ -474,7 +439,7 @@ def _grown_shadow_rectangle(vertices, dirs, r):
         for j in range(n):
             pts[j, 0] = vertices[j, 0] * e1x + vertices[j, 1] * e1y + vertices[j, 2] * e1z
             pts[j, 1] = vertices[j, 0] * e2x + vertices[j, 1] * e2y + vertices[j, 2] * e2z
-        idx = _hull2d(pts)
+        idx = hull2d(pts)
         h = idx.shape[0]
         area = 0.0
         per = 0.0
@@ -549,8 +514,10 @@ def lattice_clump_shadow(centres, radius):
 
     c = np.asarray(centres, float).reshape(-1, 3)
     r = float(radius)
-    uniq = np.unique(np.round(c / (1e-6 * r)).astype(np.int64), axis=0)
     disk = (math.pi * r * r, 2.0 * r, 2.0 * r)
+    if len(c) <= 2:  # one ball, or two: a row (the common fines of a coarse lattice; no hull needed)
+        return disk
+    uniq = np.unique(np.round(c / (1e-6 * r)).astype(np.int64), axis=0)
     if len(uniq) == 1:
         return disk
     x = c - c.mean(axis=0)

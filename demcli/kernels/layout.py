@@ -19,6 +19,10 @@ STATUS_TEXT = {OK: "ok", BAD_NUMBER: "NaN or Inf in the body state", BAD_OVERLAP
 # body flag bits
 FIX_TRANSLATION = 1
 FIX_ROTATION = 2
+FIX_X = 4          # velocity component x held at its value (polyhedra: FIX_X << d for axis d)
+FIX_Y = 8
+FIX_Z = 16
+LOADED = 32        # polyhedra: the body carries a prescribed external force (its row of the load table)
 
 # positions in the neighbour-state tuple ``nl`` of :func:`demcli.kernels.step.run_steps`
 NL_FIELDS = ("start", "pi", "pj", "rstart", "rlist", "ft", "mr", "fc", "tj", "act", "epair",

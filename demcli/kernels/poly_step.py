@@ -42,6 +42,13 @@ centroid g of I:
   k_s / k_n = 0.25 as the ratio of tangential to normal contact stiffness.
 * Coulomb slip: |F_s| <= mu F_N (the stored spring is scaled back to the limit).
 
+Actors (LOADED bodies: the loading plate, the sleeper) take their prescribed force
+F0 + F1 sin(omega (t - t0) + phase) (table ``bload``) and are not body-damped: a
+damping force on a loading device would change the load it applies (Cundall's local
+damping acts like a friction of lambda |F| on an oscillating body and makes a plate lag
+a cyclic load by a tenth of its range). Held velocity components (FIX_X << d) are
+left as they are by the kicks.
+
 Body damping: local (Cundall) and constant viscous damping through ``_body_loads``
 semantics, plus the seed's adaptive mass-proportional damping: c1 = alpha m,
 c2 = alpha I (T_d = -alpha L). It enters each half kick in the seed's central
@@ -63,7 +70,7 @@ from demcli.jit import njit
 from demcli.kernels.contact import _to_tangent_plane
 from demcli.kernels.layout import (BAD_ENERGY, BAD_NUMBER, BAD_OVERLAP, C_BODY, C_CHECK, C_DAMPING,
                                    C_ENERGY, C_FRICTION, C_GATHER, C_GRAVITY, C_KICK, C_PAIRS, C_REBUILD,
-                                   C_WALLCTRL, C_WALLMOVE, FIX_ROTATION, FIX_TRANSLATION, OK)
+                                   C_WALLCTRL, C_WALLMOVE, FIX_ROTATION, FIX_TRANSLATION, FIX_X, LOADED, OK)
 from demcli.kernels.neighbors import build_pairs, build_reverse, build_wall_pairs, carry_history
 from demcli.kernels.polyhedra import contact_frame, overlap, plane_overlap, to_world_planes, to_world_vertices
 from demcli.kernels.step import _body_loads, _drift, _omega_from_L, _rotate_rigid, _wall_control, move_walls
@@ -86,6 +93,16 @@ N_ADAMP = 5
 ADAPT_UP = 1.1       # seed eq. 27: R < 0.5
 ADAPT_DOWN = 0.99    # R > 0.5
 ADAPT_TARGET = 0.5
+
+# columns of the body load table bload[b, :], read for LOADED bodies only: the prescribed force
+# F(t) = F0 + F1 sin(omega max(t - t0, 0) + phase) [N] (a haversine from F_min to F_max:
+# F0 = (F_min + F_max)/2, F1 = (F_max - F_min)/2 along the load direction, phase = -pi/2)
+L_F0 = 0      # 3 columns: mean force [N]
+L_F1 = 3      # 3 columns: amplitude [N]
+L_OMEGA = 6   # angular frequency [rad/s]
+L_PHASE = 7   # phase at t0 [rad]
+L_T0 = 8      # time the oscillation starts [s]; before it the force stays at F0 + F1 sin(phase)
+N_LOAD = 9
 
 # positions in the neighbour-state tuple ``nl`` of :func:`run_poly_steps`
 PNL_FIELDS = ("start", "pi", "pj", "rstart", "rlist", "ft", "fc", "tj", "act", "epair", "geo",
@@ -164,19 +181,25 @@ def _kick_drift(x, v, w, q, L, f, tq, mass, inert, bflags, dt, alpha, ztq, xref,
     rebuild[0] when a centroid moved more than skin/2 from its listed position."""
     h = 0.5 * dt
     a = 0.5 * alpha * h
-    c1 = 1.0 - a
-    c2 = 1.0 / (1.0 + a)
+    c1p = 1.0 - a
+    c2p = 1.0 / (1.0 + a)
     for b in prange(x.shape[0]):
         fl = bflags[b]
         ea = 0.0
+        c1 = c1p
+        c2 = c2p
+        if fl & LOADED:  # a loading device takes its prescribed force undamped
+            c1 = 1.0
+            c2 = 1.0
         if fl & FIX_TRANSLATION == 0:
             im = h / mass[b]
             s = 0.0
             for d in range(3):
-                v0 = v[b, d]
-                v1 = (v0 * c1 + f[b, d] * im) * c2
-                v[b, d] = v1
-                s += (0.5 * (v0 + v1)) ** 2
+                if fl & (FIX_X << d) == 0:
+                    v0 = v[b, d]
+                    v1 = (v0 * c1 + f[b, d] * im) * c2
+                    v[b, d] = v1
+                    s += (0.5 * (v0 + v1)) ** 2
             ea += mass[b] * s
         if fl & FIX_ROTATION == 0:
             e0 = w[b, 0] * L[b, 0] + w[b, 1] * L[b, 1] + w[b, 2] * L[b, 2]
@@ -184,7 +207,8 @@ def _kick_drift(x, v, w, q, L, f, tq, mass, inert, bflags, dt, alpha, ztq, xref,
                 L[b, d] = (L[b, d] * c1 + h * tq[b, d]) * c2
             _rotate_rigid(b, w, q, L, ztq, inert, dt, False)  # ztq = 0: rotation only, L already kicked
             ea += 0.5 * (e0 + w[b, 0] * L[b, 0] + w[b, 1] * L[b, 1] + w[b, 2] * L[b, 2])
-        eabs[b] = alpha * h * ea
+        if fl & LOADED == 0:
+            eabs[b] = alpha * h * ea
         _drift(x, v, b, dt, xref, lim2, rebuild)
 
 
@@ -322,21 +346,25 @@ def _gather(frow, trow, erow, rstart, rlist, fc, tj, act, epair,
             wstart, wwall, wft, wfc, wgeo, wkind, wpoint, wnormal, wv, wmat,
             x, v, w, q, L, f, tq, mass, inert, bflags, rad, bmat, prm, sw, dt, kick_dt,
             shape, vertex_start, face_start, fvstart, fverts, bvstart, bfstart, wvert, wnorm, woff,
-            gravity, local, visc, alpha, esph, ebody, eabs, kevec):
+            gravity, local, visc, alpha, esph, ebody, eabs, kevec, bload, tload):
     """Per body: own row sums, reverse rows, plane walls, body loads, second half kick.
 
     dt: the contact step (0 when priming: no history or loss increments); kick_dt: the
-    half-kick step (0 when priming). Writes f, tq (total loads), kevec[b] (kinetic
-    energy after the kick) and adds the adaptive damping's absorbed energy to eabs[b].
+    half-kick step (0 when priming). tload: the time of the positions [s], for the
+    prescribed forces of LOADED bodies (table ``bload``, columns L_*). Writes f, tq
+    (total loads), kevec[b] (kinetic energy after the kick) and adds the adaptive
+    damping's absorbed energy to eabs[b].
     """
     friction = sw[S_FRICTION]
     energy = sw[S_ENERGY]
     dashpot = sw[S_DASHPOT]
     h = 0.5 * kick_dt
     a = 0.5 * alpha * h
-    c1 = 1.0 - a
-    c2 = 1.0 / (1.0 + a)
+    c1p = 1.0 - a
+    c2p = 1.0 / (1.0 + a)
     for b in prange(x.shape[0]):
+        fl = bflags[b]
+        damped = fl & LOADED == 0  # a loading device takes its prescribed force undamped
         fx = frow[b, 0]
         fy = frow[b, 1]
         fz = frow[b, 2]
@@ -432,8 +460,8 @@ def _gather(frow, trow, erow, rstart, rlist, fc, tj, act, epair,
             esph[b, 1] += 0.5 * e1
         fx, fy, fz, tx, ty, tz, p = _body_loads(
             fx, fy, fz, tx, ty, tz, m, 0.0, v[b, 0], v[b, 1], v[b, 2], w[b, 0], w[b, 1], w[b, 2],
-            gravity, local, 0.0, sw[S_GRAVITY], sw[S_LOCAL], False)
-        if sw[S_VISCOUS]:
+            gravity, local, 0.0, sw[S_GRAVITY], sw[S_LOCAL] and damped, False)
+        if sw[S_VISCOUS] and damped:
             # constant mass-proportional damping: F = -alpha m v, T = -alpha I omega = -alpha L
             am = visc * m
             fx -= am * v[b, 0]
@@ -446,6 +474,12 @@ def _gather(frow, trow, erow, rstart, rlist, fc, tj, act, epair,
                 w[b, 0] * L[b, 0] + w[b, 1] * L[b, 1] + w[b, 2] * L[b, 2])
         if energy:
             ebody[b] += p * dt
+        if fl & LOADED:
+            arg = bload[b, L_OMEGA] * max(tload - bload[b, L_T0], 0.0) + bload[b, L_PHASE]
+            sn = math.sin(arg)
+            fx += bload[b, L_F0] + bload[b, L_F1] * sn
+            fy += bload[b, L_F0 + 1] + bload[b, L_F1 + 1] * sn
+            fz += bload[b, L_F0 + 2] + bload[b, L_F1 + 2] * sn
         f[b, 0] = fx
         f[b, 1] = fy
         f[b, 2] = fz
@@ -453,23 +487,27 @@ def _gather(frow, trow, erow, rstart, rlist, fc, tj, act, epair,
         tq[b, 1] = ty
         tq[b, 2] = tz
         # second half kick (seed eqs. 23-24 form for the adaptive alpha; c1 = c2 = 1 without it)
-        fl = bflags[b]
         ea = 0.0
+        c1 = c1p if damped else 1.0
+        c2 = c2p if damped else 1.0
         if fl & FIX_TRANSLATION == 0:
             im = h / m
             s = 0.0
-            v0 = v[b, 0]
-            v1 = (v0 * c1 + fx * im) * c2
-            v[b, 0] = v1
-            s += (0.5 * (v0 + v1)) ** 2
-            v0 = v[b, 1]
-            v1 = (v0 * c1 + fy * im) * c2
-            v[b, 1] = v1
-            s += (0.5 * (v0 + v1)) ** 2
-            v0 = v[b, 2]
-            v1 = (v0 * c1 + fz * im) * c2
-            v[b, 2] = v1
-            s += (0.5 * (v0 + v1)) ** 2
+            if fl & FIX_X == 0:
+                v0 = v[b, 0]
+                v1 = (v0 * c1 + fx * im) * c2
+                v[b, 0] = v1
+                s += (0.5 * (v0 + v1)) ** 2
+            if fl & (FIX_X << 1) == 0:
+                v0 = v[b, 1]
+                v1 = (v0 * c1 + fy * im) * c2
+                v[b, 1] = v1
+                s += (0.5 * (v0 + v1)) ** 2
+            if fl & (FIX_X << 2) == 0:
+                v0 = v[b, 2]
+                v1 = (v0 * c1 + fz * im) * c2
+                v[b, 2] = v1
+                s += (0.5 * (v0 + v1)) ** 2
             ea += m * s
         if fl & FIX_ROTATION == 0:
             r0 = w[b, 0] * L[b, 0] + w[b, 1] * L[b, 1] + w[b, 2] * L[b, 2]
@@ -482,9 +520,50 @@ def _gather(frow, trow, erow, rstart, rlist, fc, tj, act, epair,
             w[b, 1] = wy
             w[b, 2] = wz
             ea += 0.5 * (r0 + wx * L[b, 0] + wy * L[b, 1] + wz * L[b, 2])
-        eabs[b] += alpha * h * ea
+        if damped:
+            eabs[b] += alpha * h * ea
         kevec[b] = 0.5 * (m * (v[b, 0] ** 2 + v[b, 1] ** 2 + v[b, 2] ** 2)
                           + w[b, 0] * L[b, 0] + w[b, 1] * L[b, 1] + w[b, 2] * L[b, 2])
+
+
+@njit
+def add_actor_pairs(start, pj, x, rad, nsmall, skin):
+    """Pair list of all bodies from the cell-grid list of the first ``nsmall`` ones.
+
+    Bodies nsmall.. are actors (a loading plate, a sleeper): far larger than the
+    particles, so they stay out of the cell grid (whose cells follow the largest
+    radius) and are paired here with every body whose bounding sphere comes within
+    ``skin`` of theirs. Rows stay sorted by j (actors have the highest indices).
+    Returns (start, pi, pj) over all bodies.
+    """
+    nb = x.shape[0]
+    cnt = np.zeros(nb, np.int64)
+    for i in range(nb):
+        if i < nsmall:
+            cnt[i] = start[i + 1] - start[i]
+        for a in range(max(i + 1, nsmall), nb):
+            r = rad[i] + rad[a] + skin
+            if (x[i, 0] - x[a, 0]) ** 2 + (x[i, 1] - x[a, 1]) ** 2 + (x[i, 2] - x[a, 2]) ** 2 < r * r:
+                cnt[i] += 1
+    nstart = np.zeros(nb + 1, np.int64)
+    for i in range(nb):
+        nstart[i + 1] = nstart[i] + cnt[i]
+    npi = np.empty(nstart[nb], np.int64)
+    npj = np.empty(nstart[nb], np.int64)
+    for i in range(nb):
+        k = nstart[i]
+        if i < nsmall:
+            for c in range(start[i], start[i + 1]):
+                npi[k] = i
+                npj[k] = pj[c]
+                k += 1
+        for a in range(max(i + 1, nsmall), nb):
+            r = rad[i] + rad[a] + skin
+            if (x[i, 0] - x[a, 0]) ** 2 + (x[i, 1] - x[a, 1]) ** 2 + (x[i, 2] - x[a, 2]) ** 2 < r * r:
+                npi[k] = i
+                npj[k] = a
+                k += 1
+    return nstart, npi, npj
 
 
 @njit
@@ -563,7 +642,8 @@ def run_poly_steps(nsteps, time, dt, sw, prm, gravity, local, visc, adamp,
                    wkind, wpoint, wnormal, wv, wmat, wctrl, wprm, wforce, wkn,
                    nl, skin, max_cells,
                    esph, ebody, eacc,
-                   check_every, overlap_limit, ke_limit, counters, info, force_rebuild, step0, prime):
+                   check_every, overlap_limit, ke_limit, counters, info, force_rebuild, step0, prime,
+                   bload, nsmall):
     """Advance ``nsteps`` steps of rigid convex polyhedra; returns (status, steps_done, time, nl).
 
     Args:
@@ -591,6 +671,9 @@ def run_poly_steps(nsteps, time, dt, sw, prm, gravity, local, visc, adamp,
         counters (N_COUNTERS,) int64; info (4,) float64 guard diagnosis.
         force_rebuild: build the lists before the first step. step0: global step at entry.
         prime: evaluate the loads at the current state first (zero-length step).
+        bload: (n_b, N_LOAD) float64 prescribed forces of LOADED bodies (L_* columns).
+        nsmall: bodies 0..nsmall-1 go through the cell grid; the rest are actors
+            (:func:`add_actor_pairs`).
     """
     x, v, w, q, L, f, tq = bodies
     vertex_start, vertices, face_start, fvstart, fverts, face_normal, face_offset = shapes
@@ -629,7 +712,9 @@ def run_poly_steps(nsteps, time, dt, sw, prm, gravity, local, visc, adamp,
                 counters[C_WALLMOVE] += 1
         if rebuild[0]:
             rebuild[0] = 0
-            nstart, npi, npj = build_pairs(x, rad, body_idx, skin, max_cells)
+            nstart, npi, npj = build_pairs(x[:nsmall], rad[:nsmall], body_idx[:nsmall], skin, max_cells)
+            if nsmall < nb:
+                nstart, npi, npj = add_actor_pairs(nstart, npj, x, rad, nsmall, skin)
             npair = npi.shape[0]
             nft = np.zeros((npair if friction else 0, 3))
             carry_history(nb, nstart, npj, start, pj, ft, nft)
@@ -669,7 +754,7 @@ def run_poly_steps(nsteps, time, dt, sw, prm, gravity, local, visc, adamp,
                 wstart, wwall, wft, wfc, wgeo, wkind, wpoint, wnormal, wv, wmat,
                 x, v, w, q, L, f, tq, mass, inert, bflags, rad, bmat, prm, sw, h, h,
                 shape, vertex_start, face_start, fvstart, fverts, bvstart, bfstart, wvert, wnorm, woff,
-                gravity, local, visc, alpha, esph, ebody, eabs, kevec)
+                gravity, local, visc, alpha, esph, ebody, eabs, kevec, bload, time + h)
         counters[C_GATHER] += 1
         counters[C_BODY] += 1
         if prime:

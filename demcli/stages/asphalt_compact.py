@@ -33,9 +33,13 @@ last ``target.hold`` records, is within ``target.stress_tolerance`` (relative) o
 target while the porosity changed by less than ``target.porosity_change`` over those
 records (a packing still creeping under the lid is not done). The average is needed: a
 servo wall on a granular packing carries a fluctuating force, the more so the fewer
-particles touch it. Porosity against time goes to
-``records/<stage>_dem.csv`` and ``records/<stage>_dem_porosity.png``; the ``compaction``
-group keeps the porosity before and after, the final box and stresses and why it stopped.
+particles touch it. Porosity against time goes to ``records/<stage>_dem.csv`` and
+``records/<stage>_dem_porosity.png``; the ``compaction`` group keeps the porosity before
+and after, the final box and stresses and why it stopped.
+
+A resumed stage (``--resume``) is bit-identical to an uninterrupted one: the switching
+state is a function of the record rows, which the checkpoint keeps, and the stage sets the
+faces' control again from it before the first step (the ``start`` hook).
 """
 
 import math
@@ -103,9 +107,15 @@ def _check(node, report):
 
 
 class Porosity:
-    """Hooks for :func:`demcli.stages.dem.integrate`: porosity and face stresses, stop rules."""
+    """Hooks for :func:`demcli.stages.dem.integrate`: porosity and face stresses, servo switching, stop rules.
 
-    def __init__(self, cfg, system, solid):
+    What it changes in the system, the servo faces' control mode, speed limit (m/s) and
+    loaded area (m^2), is a function of its record rows and the wall positions; a resumed
+    stage rebuilds it from the checkpoint, which keeps both (``checkpoint``: the
+    checkpoint State, None on a fresh start).
+    """
+
+    def __init__(self, cfg, system, solid, checkpoint=None):
         box = _box_wall(cfg)
         names = list(system.walls.name)
         self.idx = {f: names.index(f"{box.name}.{f}") for f in FACES}
@@ -115,18 +125,40 @@ class Porosity:
         self.auto_area = {f for f in self.servo if box.motion[f].area is None}
         s = cfg.target.settle_speed
         self.settle = {f: s if s is not None else 0.1 * box.motion[f].max_speed for f in self.servo}
-        self.settling = set()
-        self.history = []
-        self.recent = []
         self.vmax = {f: box.motion[f].max_speed for f in self.servo}
         self.approach = cfg.target.approach == "velocity"
-        if self.approach:  # close in at max_speed; row() switches to servo
-            from demcli.kernels.walls import VELOCITY
+        self.settling = set()
+        self.history = []  # the rows stop() averages over
+        self.recent = []  # the rows a face's switch back to closing in averages over
+        self.reason = None
+        if checkpoint is None:
+            if self.approach:  # close in at max_speed; row() switches to servo
+                for f in self.servo:
+                    self._set_mode(system, f, settle=False)
+        else:
+            self._replay(checkpoint.groups["records/dem"])
+            self._restore_walls(system)
 
-            for f in self.servo:
-                k = self.idx[f]
-                system.walls.control[k] = VELOCITY
-                system.wv[k] = box.motion[f].max_speed * system.walls.normal[k]
+    def _replay(self, rows):
+        """The switching and stop state after the stored record rows: the first row is the
+        initial record, which stop() does not see."""
+        for k in range(len(rows["step"])):
+            row = {c: float(v[k]) for c, v in rows.items()}
+            self._switch(row)
+            if k > 0:
+                self._remember(row)
+
+    def _restore_walls(self, system):
+        """The servo faces' mode, speed limit and area as the rows left them (the checkpoint
+        keeps the wall positions and velocities, the config gives the rest)."""
+        for face in self.servo:
+            if self.approach or face in self.settling:
+                self._set_mode(system, face, face in self.settling)
+        self._set_areas(system, self._size(system))
+
+    def _size(self, system):
+        lo, hi = self.box(system)
+        return hi - lo
 
     def box(self, system):
         lo = np.array([system.wpoint[self.idx[f]][d] for d, f in enumerate(("x0", "y0", "z0"))])
@@ -137,49 +169,69 @@ class Porosity:
         k = self.idx[face]
         return float(-system.wforce[k] @ system.walls.normal[k])
 
-    def row(self, system):
-        from demcli.kernels.walls import SERVO, VELOCITY, W_AREA, W_VMAX
+    def _set_areas(self, system, size):
+        """A servo face without an explicit area loads its current area (m^2)."""
+        from demcli.kernels.walls import W_AREA
 
-        lo, hi = self.box(system)
-        size = hi - lo
+        for face in self.auto_area:
+            system.walls.prm[self.idx[face], W_AREA] = _face_area(size, face)
+
+    def _set_mode(self, system, face, settle):
+        """Servo with the settle speed limit (settle) or close in at max_speed (approach: velocity);
+        servo from the start (approach: servo): settling only lowers the speed limit."""
+        from demcli.kernels.walls import SERVO, VELOCITY, W_VMAX
+
+        k = self.idx[face]
+        if not self.approach:
+            system.walls.prm[k, W_VMAX] = min(self.vmax[face], self.settle[face])
+        elif settle:  # close to the target: servo, slowly (no chatter)
+            system.walls.control[k] = SERVO
+            system.walls.prm[k, W_VMAX] = self.settle[face]
+        else:
+            system.walls.control[k] = VELOCITY
+            system.wv[k] = self.vmax[face] * system.walls.normal[k]
+
+    def _switch(self, out):
+        """{face: settle (True) or close in again (False)} for the faces that change at this record
+        row; keeps the settling faces and the recent rows up to date."""
+        changes = {}
+        for face, target in self.servo.items():
+            key = f"stress_{face}"
+            recent = [h[key] for h in self.recent] + [out[key]]
+            if face not in self.settling and out[key] >= SWITCH_UP * target:
+                changes[face] = True
+            elif (self.approach and face in self.settling and len(recent) > SWITCH_RECORDS
+                  and float(np.mean(recent[-SWITCH_RECORDS:])) < SWITCH_DOWN * target):
+                changes[face] = False  # that was a passing force chain: close in again
+        self.settling ^= set(changes)  # each change flips a face in or out
+        self.recent = (self.recent + [out])[-SWITCH_RECORDS:]
+        return changes
+
+    def _remember(self, row):
+        self.history = (self.history + [row])[-self.cfg.target.hold:]
+
+    def row(self, system):
+        size = self._size(system)
         vol = float(np.prod(size))
         out = {"porosity": 1.0 - self.solid / vol, "box_volume": vol}
         for d, ax in enumerate("xyz"):
-            area = float(np.prod(np.delete(size, d)))
             f = 0.5 * (self.face_force(system, f"{ax}0") + self.face_force(system, f"{ax}1"))
-            out[f"stress_{ax}"] = f / area
+            out[f"stress_{ax}"] = f / _face_area(size, f"{ax}0")
         for face in self.servo:
-            d = FACES.index(face) // 2
-            area = float(np.prod(np.delete(size, d)))
-            out[f"stress_{face}"] = self.face_force(system, face) / area
-            k = self.idx[face]
-            if face in self.auto_area:  # the servo's loaded area follows the moving faces
-                system.walls.prm[k, W_AREA] = area
-            if self.approach:
-                recent = [h[f"stress_{face}"] for h in self.recent] + [out[f"stress_{face}"]]
-                mean = float(np.mean(recent[-SWITCH_RECORDS:]))
-                target = self.servo[face]
-                if face not in self.settling and out[f"stress_{face}"] >= SWITCH_UP * target:
-                    self.settling.add(face)  # close to the target: servo, slowly (no chatter)
-                    system.walls.control[k] = SERVO
-                    system.walls.prm[k, W_VMAX] = self.settle[face]
-                elif face in self.settling and len(recent) > SWITCH_RECORDS and mean < SWITCH_DOWN * target:
-                    self.settling.discard(face)  # that was a passing force chain: close in again
-                    system.walls.control[k] = VELOCITY
-                    system.wv[k] = self.vmax[face] * system.walls.normal[k]
-            elif face not in self.settling and out[f"stress_{face}"] >= SWITCH_UP * self.servo[face]:
-                self.settling.add(face)
-                system.walls.prm[k, W_VMAX] = min(system.walls.prm[k, W_VMAX], self.settle[face])
-        self.recent = (self.recent + [out])[-SWITCH_RECORDS:]
+            out[f"stress_{face}"] = self.face_force(system, face) / _face_area(size, face)
+        self._set_areas(system, size)  # the servo's loaded area follows the moving faces
+        for face, settle in self._switch(out).items():
+            self._set_mode(system, face, settle)
         return out
 
     def stop(self, system, row):
         t = self.cfg.target
         if t.porosity is not None and row["porosity"] <= t.porosity:
-            return f"at the target porosity {t.porosity:g} (porosity {row['porosity']:.4f})"
+            self.reason = f"at the target porosity {t.porosity:g} (porosity {row['porosity']:.4f})"
+            return self.reason
         if not self.servo:
             return None
-        self.history = (self.history + [row])[-t.hold:]
+        self._remember(row)
         if len(self.history) < t.hold:
             return None
         poro = [h["porosity"] for h in self.history]
@@ -189,8 +241,14 @@ class Porosity:
             mean = float(np.mean([h[f"stress_{face}"] for h in self.history]))
             if target > 0 and abs(mean / target - 1.0) > t.stress_tolerance:
                 return None
-        return (f"at the servo stress ({', '.join(f'{f} {s / 1e6:g} MPa' for f, s in self.servo.items())}: "
-                f"mean of the last {t.hold} records within {100 * t.stress_tolerance:g} %)")
+        self.reason = (f"at the servo stress ({', '.join(f'{f} {s / 1e6:g} MPa' for f, s in self.servo.items())}: "
+                       f"mean of the last {t.hold} records within {100 * t.stress_tolerance:g} %)")
+        return self.reason
+
+
+def _face_area(size, face):
+    """Area (m^2) of a box face of the box size (3,) (m)."""
+    return float(np.prod(np.delete(size, FACES.index(face) // 2)))
 
 
 def run(ctx, cfg, state_in):
@@ -209,24 +267,13 @@ def run(ctx, cfg, state_in):
         hi_t = ", ".join(f"{v * 1e3:g}" for v in hi)
         raise InputError(f"stage {ctx.name}: {int(out.sum())} spheres stick out of the box wall {box.name} "
                          f"({lo_t} - {hi_t} mm); make the box enclose the carving region")
-    hooks_obj = {"reason": None}
+    hook = {}
 
-    def porosity(system):
-        if "p" not in hooks_obj:
-            hooks_obj["p"] = Porosity(cfg, system, solid)
-        return hooks_obj["p"]
-
-    def row(system):
-        return porosity(system).row(system)
-
-    def stop(system, rec):
-        reason = porosity(system).stop(system, rec)
-        if reason:
-            hooks_obj["reason"] = reason
-        return reason
+    def start(system, checkpoint):
+        hook["p"] = Porosity(cfg, system, solid, checkpoint)
 
     def finish(ctx_, system, st, table):
-        p = porosity(system)
+        p = hook["p"]
         for name in ("aggregates", "seeds", "gradation"):
             g = copy_group(state_in, name)
             if g is not None:
@@ -234,7 +281,7 @@ def run(ctx, cfg, state_in):
         last = p.row(system)
         lo_, hi_ = p.box(system)
         rows = table.to_arrays()
-        stopped = hooks_obj["reason"]
+        stopped = p.reason
         st.groups["compaction"] = {
             "porosity_initial": np.float64(rows["porosity"][0]), "porosity_final": np.float64(last["porosity"]),
             "solid_volume": np.float64(solid), "box": np.r_[lo_, hi_],
@@ -250,7 +297,8 @@ def run(ctx, cfg, state_in):
 
     columns = {"porosity": "1", "box_volume": "m^3", "stress_x": "Pa", "stress_y": "Pa", "stress_z": "Pa"}
     columns.update({f"stress_{f}": "Pa" for f in box.motion if box.motion[f].mode == "servo"})
-    hooks = dem.Hooks(columns=columns, row=row, stop=stop, finish=finish)
+    hooks = dem.Hooks(columns=columns, start=start, row=lambda system: hook["p"].row(system),
+                      stop=lambda system, rec: hook["p"].stop(system, rec), finish=finish)
     return dem.integrate(ctx, cfg, state_in, hooks)
 
 

@@ -120,6 +120,15 @@ FIELDS = {
     }, default={}),
     "neighbors": Section({"skin": Float(min=0, min_inclusive=False, default=0.3,
                                         doc="Verlet skin / mean radius")}, default={}),
+    "scaling": Section({
+        "stiffness": Float(min=0, max=1, min_inclusive=False, default=1.0,
+                           doc="multiplies every Young's modulus (and linear kn, kt): time step / sqrt(factor); "
+                               "overlaps and contact compliance grow by 1/factor (sphere Hertz: 1/factor^(2/3))"),
+        "mass": Float(min=1, default=1.0,
+                      doc="polyhedra: multiplies every body's mass and inertia but not its weight (gravity "
+                          "divided by it): time step x sqrt(factor); for quasi-static stages only; a power of "
+                          "2 so that scaling and unscaling are exact"),
+    }, default={}, doc="cost knobs (docs/scaling.md): off by default"),
     "safety": Section({
         "check_every": Int(min=1, default=100),
         "overlap_limit": Float(min=0, min_inclusive=False, default=0.5, doc="overlap / smaller radius"),
@@ -147,6 +156,9 @@ def _check(node, report):
             report(f"contact.pairs.{k}.friction", "physics.friction is off", p.friction)
         if p.rolling_friction is not None and not node.physics.rolling_resistance:
             report(f"contact.pairs.{k}.rolling_friction", "physics.rolling_resistance is off", p.rolling_friction)
+    m = node.scaling.mass
+    if m != 1.0 and 2.0 ** round(math.log2(m)) != m:
+        report("scaling.mass", "must be a power of 2 (1, 2, 4, ..., 1024) so that scaling is exact", m)
     if node.stop is not None and node.physics.gravity is None:
         report("stop", "the kinetic-energy criterion needs gravity (it scales with m g d)", None)
 
@@ -174,18 +186,29 @@ def contact_model(cfg):
     from demcli.engine.materials import ContactModel
 
     c = cfg.contact
+    s = cfg.scaling.stiffness if "scaling" in cfg else 1.0
+
+    def scaled(k, value):
+        return value * s if k in ("kn", "kt") else value
+
     pairs = tuple((p.materials[0], p.materials[1],
-                   {k: p[k] for k in ("friction", "rolling_friction", "restitution", "kn", "kt", "cn")
+                   {k: scaled(k, p[k]) for k in ("friction", "rolling_friction", "restitution", "kn", "kt", "cn")
                     if p[k] is not None}) for p in c.pairs)
-    kn = c.kn or 0.0
-    kt = c.kt if c.kt is not None else kn / 4.0
+    kn = (c.kn or 0.0) * s
+    kt = c.kt * s if c.kt is not None else kn / 4.0
     return ContactModel(law=c.law, kn=kn, kt=kt, cn=c.cn, tangential_damping=c.tangential_damping, pairs=pairs)
 
 
-def case_materials(case):
+def case_materials(case, stiffness=1.0):
+    """Materials of the case; ``stiffness`` scales every Young's modulus (scaling.stiffness)."""
     from demcli.engine.materials import Material
 
-    return [Material(name, **dict(m.to_dict())) for name, m in case.materials.items()]
+    mats = [Material(name, **dict(m.to_dict())) for name, m in case.materials.items()]
+    if stiffness != 1.0:
+        import dataclasses
+
+        mats = [dataclasses.replace(m, young=m.young * stiffness) for m in mats]
+    return mats
 
 
 def build_walls(cfg, case):
@@ -284,10 +307,15 @@ def make_system(ctx, cfg, groups, time=0.0, step=0, resume=False):
                    local_damping=p.local_damping or 0.0, viscous_damping=p.viscous_damping or 0.0,
                    skin=cfg.neighbors.skin, check_every=cfg.safety.check_every,
                    overlap_limit=cfg.safety.overlap_limit, energy_limit=cfg.safety.energy_limit)
+    extra = {}
+    if cfg.scaling.mass != 1.0:
+        if not poly:
+            raise InputError(f"stage {ctx.name}: scaling.mass is for polyhedral bodies only")
+        extra["mass_scale"] = cfg.scaling.mass
     if poly:
         from demcli.engine.poly_system import PolySystem as System  # noqa: F811
-    system = System(groups, case_materials(ctx.case), contact_model(cfg), plan, walls, dyn, dt=1.0,
-                    time=time, step=step)
+    system = System(groups, case_materials(ctx.case, cfg.scaling.stiffness), contact_model(cfg), plan, walls,
+                    dyn, dt=1.0, time=time, step=step, **extra)
     if p.adaptive_damping is not None and not resume:  # a resumed stage keeps its adapted alpha
         system.alpha = float(p.adaptive_damping.initial)
     dt_crit = system.critical_dt()
@@ -368,12 +396,22 @@ class Hooks:
         row: ``row(system) -> dict`` values of those columns at each record.
         stop: ``stop(system, row) -> str | None``: a reason to end the stage at a record.
         finish: ``finish(ctx, system, state, table)`` after the loop (extra outputs).
+        timing: ``timing(system, dt, dt_crit) -> (dt, total_steps, record_every)``
+            replaces the time step, the stage length and the record interval of the
+            config (a cyclic load wants a whole number of steps per cycle).
+        start: ``start(system, checkpoint)`` once before the first step (and the first
+            record): ``checkpoint`` is the State a resumed stage continues from, None on a
+            fresh start. The checkpoint keeps the scene, the wall positions and velocities
+            and the records; a hook that changes anything else (wall control modes or
+            parameters) must set it again here from what the checkpoint keeps.
     """
 
     columns: dict = field(default_factory=dict)
     row: object = None
     stop: object = None
     finish: object = None
+    timing: object = None
+    start: object = None
 
 
 def run(ctx, cfg, state_in):
@@ -404,10 +442,17 @@ def integrate(ctx, cfg, state_in, hooks=None):
         ctx.log(f"resuming from checkpoint at step {system.step} (t = {system.time:.6g} s)")
     else:
         system.ke_limit = cfg.safety.energy_limit * reference_energy(system)
+    hooks = hooks or Hooks()
+    if hooks.timing is not None:
+        dt, total, rec_every = hooks.timing(system, dt, dt_crit)
+        system.dt = dt
+    else:
+        total = cfg.time.steps if cfg.time.steps is not None else int(math.ceil(cfg.time.duration / dt))
+        rec_every = max(1, total // cfg.output.records)
+    if hooks.start is not None:
+        hooks.start(system, ckpt)
     ctx.log(f"dt = {dt:.4g} s = {dt / dt_crit:.3g} x critical {dt_crit:.4g} s; "
             f"effects: {', '.join(sorted(plan.effects)) or 'none'}")
-    total = cfg.time.steps if cfg.time.steps is not None else int(math.ceil(cfg.time.duration / dt))
-    rec_every = max(1, total // cfg.output.records)
     snap_every = max(1, total // cfg.output.snapshots) if cfg.output.snapshots else 0
     energy = plan.has("energy")
     cols = {"time": "s", "step": "1", "kinetic": "J", "contacts": "1", "wall_contacts": "1",
@@ -417,7 +462,6 @@ def integrate(ctx, cfg, state_in, hooks=None):
                                       "total")})
     if plan.has("adaptive_damping"):
         cols["alpha"] = "1/s"
-    hooks = hooks or Hooks()
     cols.update(hooks.columns)
     if ckpt is not None:
         table = RecordTable.from_state(ckpt, "dem")

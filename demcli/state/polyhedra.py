@@ -88,6 +88,20 @@ register(Field("adaptive_damping/alpha", "f", (), "1/s", "current damping coeffi
 register(Field("adaptive_damping/ke_prev", "f", (), "J", "kinetic energy at the previous step",
                writer="effect adaptive_damping"))
 
+register_group("actors", "Rigid bodies that load the bed (loading plate, sleeper): the last bodies of the "
+               "scene, moving along their load direction only; prescribed force "
+               "F(t) = load_mean + load_amplitude sin(2 pi frequency max(t - start, 0) + phase)",
+               writer="stages vibrate, sleeper")
+for _name, _kind, _dims, _unit, _doc, _kw in [
+        ("body", "i", ("n_a",), "", "body index", {"index_of": "n_b"}),
+        ("name", "str", ("n_a",), "", "role: plate or sleeper", {}),
+        ("load_mean", "f", ("n_a", 3), "N", "mean prescribed force (besides gravity)", {}),
+        ("load_amplitude", "f", ("n_a", 3), "N", "amplitude of the sinusoidal part", {}),
+        ("frequency", "f", ("n_a",), "Hz", "load frequency", {}),
+        ("phase", "f", ("n_a",), "rad", "phase of the sine at the start time", {}),
+        ("start", "f", ("n_a",), "s", "time the oscillation starts (before: the force at its phase)", {})]:
+    register(Field(f"actors/{_name}", _kind, _dims, _unit, _doc, writer="stages vibrate, sleeper", **_kw))
+
 SHAPE_FIELDS = ("vertex_start", "vertices", "face_start", "face_vertex_start", "face_vertices", "face_normal",
                 "face_offset", "edge_start", "edges", "volume", "inertia", "radius")
 

@@ -1,0 +1,554 @@
+"""Ballast box stages (seed 002, Shao, Lian & Yang 2017, sec. 4): ``deposit``, ``vibrate``, ``sleeper``.
+
+All three run the polyhedral engine through the ``dem`` stage loop
+(:func:`demcli.stages.dem.integrate`) and take every key of a ``dem`` stage
+(physics, contact, walls, time, output, neighbors, scaling, safety); their walls must
+include one ``box`` wall, the ballast box. They carry the ``gradation`` and ``library``
+groups of their input forward, so that a later stage can draw more ballast.
+
+Bed measures (:func:`bed_measures`), with M the particles' mass (volume x material
+density, never the scaled mass), A the box floor area and h a bed height:
+bulk density rho_b = M / (A h); porosity n = 1 - rho_b / rho_s with rho_s the mass-
+weighted particle density; void ratio e = n / (1 - n).
+
+* ``deposit``: gravity deposition until the bed is at rest (``stop.kinetic_ratio``,
+  required). h = the mean over a grid of columns (cells of the median particle size)
+  of the highest particle point in each column: the height a plate laid on the bed
+  would rest at, smoothed over the peaks. Group ``bed``.
+* ``vibrate``: a cuboid plate (an actor, :mod:`demcli.engine.actors`) laid on the bed
+  and loaded by F(t) = F_min + (F_max - F_min)(1 - cos 2 pi f t)/2 on top of its
+  weight (seed: 0-40 kN at 10 Hz); h = the plate's underside (the bed under the
+  plate, as the seed measures it). Per cycle (at each cycle's end, load at F_min):
+  plate position, bulk density, porosity, void ratio (records ``<stage>_cycles``,
+  CSV and PNG). Stops after ``cycles`` or at the first cycle end with
+  rho_b >= ``target_density`` (seed: 1.55 g/cm^3, where the plate is removed).
+* ``sleeper``: the plate is removed; a sleeper (a cuboid actor) is set on the bed;
+  its shoulders (the box beside it, up to ``shoulders.height``, default the sleeper's
+  top) are filled with ballast drawn from the library with the gradation of the case,
+  enough for ``shoulders.bulk_density``, stacked loosely above the bed by the
+  assembly's drop placement; during ``load.settle`` the sleeper carries F_min while
+  the shoulder ballast falls into place; then the load cycles between F_min and
+  F_max (seed: 3-80 kN at 10 Hz, 80 cycles). Per cycle: the sleeper's accumulated
+  settlement (its descent since the cycles began) and its position (records
+  ``<stage>_cycles``).
+
+The three stages of the seed's cases overlay into the paper's figures with
+``demcli compare`` (:mod:`demcli.compare`).
+"""
+
+import math
+
+import numpy as np
+
+from demcli.config.schema import Bool, Float, Int, Node, Optional, Section, Str, Vector
+from demcli.errors import InputError
+from demcli.stages import dem
+from demcli.stages.base import StageType, register_stage
+from demcli.state.fields import Field, register, register_group
+
+register_group("bed", "Ballast bed measures at the end of a ballast box stage (seed 002)",
+               writer="stages deposit, vibrate, sleeper")
+for _name, _unit, _doc in [("height", "m", "bed height h used for the bulk density"),
+                           ("bulk_density", "kg/m^3", "particle mass / (box floor area x h)"),
+                           ("porosity", "1", "1 - bulk density / particle density"),
+                           ("void_ratio", "1", "porosity / (1 - porosity)"),
+                           ("particle_mass", "kg", "mass of the ballast particles")]:
+    register(Field(f"bed/{_name}", "f", (), _unit, _doc, writer="stages deposit, vibrate, sleeper"))
+
+CARRIED = ("gradation", "library")  # groups passed from the input to the output
+
+LOAD = Section({
+    "min": Float("N", min=0, default=0.0, doc="force at the start of each cycle (besides the actor's weight)"),
+    "max": Float("N", min=0, doc="peak force"),
+    "frequency": Float("Hz", min=0, min_inclusive=False),
+    "settle": Float("s", min=0, default=0.0, doc="time at F_min before the cycles start"),
+}, doc="haversine F_min -> F_max -> F_min per cycle, pushing down")
+
+
+def _dem_fields():
+    f = dict(dem.FIELDS)
+    f["time"] = Section({
+        "dt": Optional(Float("s", min=0, min_inclusive=False), doc="explicit time step (default: auto)"),
+        "dt_factor": Float(min=0, max=1, min_inclusive=False, default=0.1,
+                           doc="time step as a fraction of the critical step"),
+    }, default={}, doc="the stage length follows from the cycles")
+    f.pop("stop")
+    f["records_per_cycle"] = Int(min=1, default=4, doc="dem records per load cycle")
+    return f
+
+
+def _check_box(node, report):
+    if sum(1 for w in node.walls if w.type == "box") != 1:
+        report("walls", "needs exactly one box wall (the ballast box)", len(node.walls))
+
+
+def _check_deposit(node, report):
+    dem._check(node, report)
+    _check_box(node, report)
+    if node.stop is None:
+        report("stop", "deposit needs a stop criterion (stop.kinetic_ratio)", None)
+
+
+def _check_cyclic(node, report):
+    _check_box(node, report)
+    if node.load.max < node.load.min:
+        report("load.max", f"must be >= load.min ({node.load.min:g} N)", node.load.max)
+
+
+# ---------------------------------------------------------------------------------------
+# measures
+# ---------------------------------------------------------------------------------------
+
+def box_wall(cfg):
+    """(min (3,), max (3,)) of the stage's box wall [m]."""
+    w = next(w for w in cfg.walls if w.type == "box")
+    return np.array(w.min, float), np.array(w.max, float)
+
+
+def particles(groups):
+    """Indices of the ballast particles (every body but the actors)."""
+    nb = len(groups["bodies"]["mass"])
+    a = groups.get("actors", {})
+    n = int(np.min(a["body"])) if len(a) and len(a["body"]) else nb
+    return np.arange(n)
+
+
+def particle_mass(groups, case):
+    """(mass [kg], mass-weighted particle density [kg/m^3]) of the ballast particles."""
+    idx = particles(groups)
+    vol = np.asarray(groups["polyhedron_shapes"]["volume"])[np.asarray(groups["polyhedra"]["shape"])[idx]]
+    dens = np.array([m.density for m in case.materials.values()])[np.asarray(groups["polyhedra"]["material"])[idx]]
+    m = float((vol * dens).sum())
+    return m, m / float(vol.sum()) if len(idx) else 0.0
+
+
+def bed_measures(mass, rho_s, area, height):
+    """{height, bulk_density, porosity, void_ratio, particle_mass} of a bed [SI]."""
+    rho_b = mass / (area * height) if height > 0 else math.inf
+    n = 1.0 - rho_b / rho_s
+    return {"height": height, "bulk_density": rho_b, "porosity": n,
+            "void_ratio": n / (1.0 - n) if n < 1.0 else math.inf, "particle_mass": mass}
+
+
+def surface_height(groups, lo, hi, cell):
+    """Mean over the (x, y) columns of width ``cell`` of the box of the highest particle point [m]."""
+    from demcli.state import State
+    from demcli.state.polyhedra import world_vertices
+
+    st = State(groups=groups)
+    v, owner = world_vertices(st)
+    v = v[owner < len(particles(groups))]
+    n = np.maximum(1, np.floor((hi[:2] - lo[:2]) / cell).astype(int))
+    ij = np.clip(((v[:, :2] - lo[:2]) / (hi[:2] - lo[:2]) * n).astype(int), 0, n - 1)
+    top = np.full(n[0] * n[1], -np.inf)
+    np.maximum.at(top, ij[:, 0] * n[1] + ij[:, 1], v[:, 2])
+    top = top[np.isfinite(top)]
+    return float(top.mean()) - lo[2] if len(top) else 0.0
+
+
+def _median_size(groups):
+    s = np.asarray(groups["polyhedra"]["sieve_size"])[particles(groups)]
+    s = s[s > 0]
+    return float(np.median(s)) if len(s) else 2.0 * float(np.median(groups["polyhedron_shapes"]["radius"]))
+
+
+def _carry(state, state_in):
+    for g in CARRIED:
+        if g in state_in.groups:
+            state.groups[g] = {k: np.asarray(v) for k, v in state_in.groups[g].items()}
+            if g in state_in.group_attrs:
+                state.group_attrs[g] = dict(state_in.group_attrs[g])
+
+
+def _bed_group(meas):
+    return {k: np.float64(v) for k, v in meas.items()}
+
+
+def _log_bed(ctx, what, meas):
+    ctx.log(f"{what}: bed height {meas['height'] * 1e3:.1f} mm, bulk density {meas['bulk_density'] / 1e3:.4g} g/cm^3, "
+            f"porosity {meas['porosity']:.4f}, void ratio {meas['void_ratio']:.4f}")
+
+
+# ---------------------------------------------------------------------------------------
+# deposit
+# ---------------------------------------------------------------------------------------
+
+def run_deposit(ctx, cfg, state_in):
+    lo, hi = box_wall(cfg)
+    area = float(np.prod(hi[:2] - lo[:2]))
+    mass, rho_s = particle_mass(state_in.groups, ctx.case)
+    cell = _median_size(state_in.groups)
+
+    def row(system):
+        h = surface_height(system.groups(), lo, hi, cell)
+        return {k: v for k, v in bed_measures(mass, rho_s, area, h).items() if k != "particle_mass"}
+
+    def finish(ctx_, system, state, table):
+        _carry(state, state_in)
+        meas = bed_measures(mass, rho_s, area, surface_height(state.groups, lo, hi, cell))
+        state.groups["bed"] = _bed_group(meas)
+        ctx_.write_records(table, x="time", ys=["bulk_density"], suffix="density")
+        _log_bed(ctx_, "deposited", meas)
+
+    hooks = dem.Hooks(columns={"height": "m", "bulk_density": "kg/m^3", "porosity": "1", "void_ratio": "1"},
+                      row=row, finish=finish)
+    return dem.integrate(ctx, cfg, state_in, hooks)
+
+
+# ---------------------------------------------------------------------------------------
+# cyclic loading (vibrate, sleeper)
+# ---------------------------------------------------------------------------------------
+
+def cycle_timing(load, cycles, records_per_cycle, dt):
+    """(dt, total steps, record interval): a whole number of steps per cycle, a multiple
+    of ``records_per_cycle``, with dt no larger than asked; the settle time rounded up to
+    whole records."""
+    rec = records_per_cycle
+    spc = int(math.ceil(1.0 / (load.frequency * dt) / rec)) * rec
+    dt = 1.0 / (load.frequency * spc)
+    settle = int(math.ceil(load.settle / dt / (spc // rec))) * (spc // rec)
+    return dt, settle + cycles * spc, spc // rec
+
+
+def _cyclic(ctx, cfg, state_in, actor, measure, columns, stop=None, finish_extra=None):
+    """Run a cyclic stage on the dem loop: ``measure(system) -> dict`` of ``columns`` at each
+    record, plus ``cycle``; the rows at whole cycles go to the ``cycles`` record."""
+    from demcli.engine.actors import actor_index
+    from demcli.state import RecordTable
+
+    load = cfg.load
+    t_start = [load.settle]
+
+    def timing(system, dt, dt_crit):
+        dt, total, rec = cycle_timing(load, cfg.cycles, cfg.records_per_cycle, dt)
+        spc = rec * cfg.records_per_cycle
+        t_start[0] = (total - cfg.cycles * spc) * dt  # the settle time on whole records
+        system.set_actor_start(actor, t_start[0])
+        return dt, total, rec
+
+    def cycle_of(system):
+        return (system.time - t_start[0]) * load.frequency
+
+    def row(system):
+        out = {"cycle": cycle_of(system)}
+        out.update(measure(system))
+        return out
+
+    def is_cycle_end(r):
+        c = r["cycle"]
+        return c >= -1e-9 and abs(c - round(c)) < 1e-6
+
+    def stop_hook(system, r):
+        if stop is not None and is_cycle_end(r) and round(r["cycle"]) >= 1:
+            return stop(r)
+        return None
+
+    def finish(ctx_, system, state, table):
+        _carry(state, state_in)
+        rows = table.to_arrays()
+        cyc = RecordTable("cycles", {"cycle": "1", **columns})
+        for k in range(len(rows["cycle"])):
+            r = {c: rows[c][k] for c in rows}
+            if is_cycle_end(r):
+                cyc.append({"cycle": int(round(r["cycle"])), **{c: float(r[c]) for c in columns}})
+        cyc.to_state(state)
+        if finish_extra is not None:
+            finish_extra(ctx_, system, state, cyc)
+
+    b = actor_index(state_in.groups, actor)
+    if b is None:
+        raise InputError(f"stage {ctx.name}: the scene has no {actor}")
+    hooks = dem.Hooks(columns={"cycle": "1", **columns}, row=row, stop=stop_hook, finish=finish, timing=timing)
+    dcfg = dict(cfg)
+    dcfg["time"] = Node({"steps": 1, "duration": None, "dt": cfg.time.dt, "dt_factor": cfg.time.dt_factor})
+    dcfg["stop"] = None
+    return dem.integrate(ctx, Node(dcfg), state_in, hooks)
+
+
+def _actor_z(system, b):
+    return float(system.x[b, 2])
+
+
+def _actor_bottom(groups, b):
+    """Lowest point of actor b [m]."""
+    sh = groups["polyhedron_shapes"]
+    k = int(groups["polyhedra"]["shape"][b])
+    v = np.asarray(sh["vertices"])[sh["vertex_start"][k]:sh["vertex_start"][k + 1]]
+    from demcli.state.polyhedra import rotation_matrices
+
+    rot = rotation_matrices(np.asarray(groups["bodies"]["q"])[b:b + 1])[0]
+    return float((v @ rot.T)[:, 2].min() + groups["bodies"]["x"][b, 2])
+
+
+def _load_row(load, t0):
+    from demcli.engine.actors import haversine
+
+    return haversine(load.min, load.max, load.frequency, start=t0)
+
+
+def _state_with(ctx, state_in, groups):
+    st = ctx.new_state()
+    st.groups.update(groups)
+    _carry(st, state_in)
+    return st
+
+
+def run_vibrate(ctx, cfg, state_in):
+    from demcli.engine.actors import actor_index, add_actor, box_polyhedron, remove_actors
+
+    lo, hi = box_wall(cfg)
+    area = float(np.prod(hi[:2] - lo[:2]))
+    groups = remove_actors(state_in.groups)
+    mass, rho_s = particle_mass(groups, ctx.case)
+    p = cfg.plate
+    size = np.array(p.size) if p.size is not None else np.r_[hi[:2] - lo[:2] - 2.0 * p.gap, p.thickness]
+    top = _top(groups)
+    centre = np.r_[0.5 * (lo[:2] + hi[:2]), top + p.clearance + 0.5 * size[2]]
+    mats = list(ctx.case.materials)
+    groups = add_actor(groups, box_polyhedron(size), centre, ctx.case.materials[p.material].density,
+                       mats.index(p.material), "plate", load=_load_row(cfg.load, cfg.load.settle))
+    b = actor_index(groups, "plate")
+    half = 0.5 * size[2]
+
+    def measure(system):
+        h = float(system.x[b, 2]) - half - lo[2]
+        m = bed_measures(mass, rho_s, area, h)
+        return {"plate": float(system.x[b, 2]), **{k: m[k] for k in ("bulk_density", "porosity", "void_ratio")}}
+
+    def stop(r):
+        if cfg.target_density is not None and r["bulk_density"] >= cfg.target_density:
+            return f"bulk density {r['bulk_density'] / 1e3:.4g} g/cm^3 reached the target after {round(r['cycle'])} cycles"
+        return None
+
+    def finish(ctx_, system, state, cyc):
+        h = float(system.x[b, 2]) - half - lo[2]
+        meas = bed_measures(mass, rho_s, area, h)
+        state.groups["bed"] = _bed_group(meas)
+        ctx_.write_records(cyc, x="cycle", ys=["bulk_density"], suffix="density")
+        ctx_.write_records(cyc, x="cycle", ys=["void_ratio"], suffix="void_ratio")
+        rows = cyc.to_arrays()
+        if len(rows["cycle"]):
+            ctx_.log(f"bulk density {rows['bulk_density'][0] / 1e3:.4g} -> {rows['bulk_density'][-1] / 1e3:.4g} g/cm^3 "
+                     f"over {int(rows['cycle'][-1])} cycles")
+        _log_bed(ctx_, "under the plate", meas)
+
+    return _cyclic(ctx, cfg, _state_with(ctx, state_in, groups), "plate", measure,
+                   {"plate": "m", "bulk_density": "kg/m^3", "porosity": "1", "void_ratio": "1"}, stop=stop,
+                   finish_extra=finish)
+
+
+def _top(groups):
+    from demcli.state import State
+    from demcli.state.polyhedra import world_vertices
+
+    v, owner = world_vertices(State(groups=groups))
+    v = v[owner < len(particles(groups))]
+    return float(v[:, 2].max()) if len(v) else 0.0
+
+
+def shoulder_ballast(ctx, groups, state_in, region_lo, region_hi, solids, material, clearance, tries, slide):
+    """Groups with ballast drawn from the library (the case's gradation, ``solids`` m^3 of
+    it) stacked by drop placement in the box ``region_lo``-``region_hi`` [m]."""
+    import json
+
+    from demcli.stages.assemble import _rotated, drop_pack, pick_classes
+    from demcli.stages.ballast_library import ensure_library
+    from demcli.state.polyhedra import ShapeTable, rotation_matrices
+
+    if "library" not in state_in.groups or "gradation" not in state_in.groups:
+        raise InputError(f"stage {ctx.name}: filling the shoulders needs the gradation and library of the case "
+                         "(the input state does not carry them)")
+    g = {k: np.asarray(v) for k, v in state_in.groups["gradation"].items()}
+    f = solids / float(g["class_amount"].sum())
+    g["class_amount"] = g["class_amount"] * f
+    g["class_count"] = np.maximum(0, np.round(np.asarray(g["class_count"]) * f)).astype(np.int64)
+    attrs = state_in.group_attrs["library"]
+    lib, _, _ = ensure_library(json.loads(attrs["generator"]), path=attrs["path"], log=ctx.log)
+    rng = ctx.rng
+    rows, cls, _ = pick_classes(rng, lib, g)
+    n = len(rows)
+    shapes = lib.shapes.subset(rows)
+    q = _fitting_orientations(rng, shapes, region_hi[:2] - region_lo[:2] - 2.0 * clearance)
+    x, top = drop_pack(rng, _rotated(shapes, rotation_matrices(q)), region_lo, region_hi, clearance, tries=tries,
+                       slide=slide)
+    density = ctx.case.materials[material].density
+    nb = len(groups["bodies"]["mass"])
+    p = lib.particles
+    new = {"x": x, "v": np.zeros((n, 3)), "q": q, "omega": np.zeros((n, 3)), "mass": density * shapes.volume,
+           "inertia": density * shapes.inertia, "id": np.arange(n, dtype=np.int64) + int(np.max(groups["bodies"]["id"])) + 1,
+           "flags": np.zeros(n, np.int8)}
+    out = dict(groups)
+    out["bodies"] = {k: np.concatenate([np.asarray(v), np.asarray(new[k], np.asarray(v).dtype) if k in new else
+                                        np.zeros((n,) + np.asarray(v).shape[1:], np.asarray(v).dtype)])
+                     for k, v in groups["bodies"].items()}
+    nshape = len(groups["polyhedron_shapes"]["volume"])
+    newp = {"shape": np.arange(n, dtype=np.int64) + nshape, "material": np.full(n, list(ctx.case.materials).index(material)),
+            "size_class": cls, "sieve_size": p["sieve_size"][rows], "library_index": rows.astype(np.int64),
+            "flaky": p["flaky"][rows], "elongated": p["elongated"][rows]}
+    out["polyhedra"] = {k: np.concatenate([np.asarray(v), np.asarray(newp[k], np.asarray(v).dtype)])
+                        for k, v in groups["polyhedra"].items()}
+    out["polyhedron_shapes"] = ShapeTable.concat([ShapeTable.from_group(groups["polyhedron_shapes"]),
+                                                 shapes]).to_group()
+    ctx.log(f"shoulders: {n} particles, {shapes.volume.sum() * 1e6:.5g} cm^3 of solids (target {solids * 1e6:.5g}), "
+            f"stacked to z = {top:.3f} m; bodies {nb}..{nb + n - 1}")
+    return out
+
+
+def _fitting_orientations(rng, shapes, floor, tries=100):
+    """Uniform random orientations (n, 4), each redrawn (up to ``tries`` times) until the
+    particle's (x, y) extent fits the ``floor`` (2,) [m] of a narrow shoulder."""
+    from demcli.stages.assemble import random_quaternions
+    from demcli.state.polyhedra import rotation_matrices
+
+    n = len(shapes)
+    q = random_quaternions(rng, n)
+    for k in range(n):
+        v = shapes.shape(k)[0]
+        for _ in range(tries):
+            w = v @ rotation_matrices(q[k:k + 1])[0].T
+            if np.all(w[:, :2].max(axis=0) - w[:, :2].min(axis=0) < floor):
+                break
+            q[k] = random_quaternions(rng, 1)[0]
+    return q
+
+
+def run_sleeper(ctx, cfg, state_in):
+    from demcli.engine.actors import actor_index, add_actor, box_polyhedron, remove_actors
+
+    lo, hi = box_wall(cfg)
+    plate = actor_index(state_in.groups, "plate")
+    groups = state_in.groups
+    bed = _actor_bottom(groups, plate) if plate is not None else _top(groups)
+    groups = remove_actors(groups)
+    sl = cfg.sleeper
+    size = np.array(sl.size)
+    cxy = np.array(sl.centre) if sl.centre is not None else 0.5 * (lo[:2] + hi[:2])
+    s_lo = np.r_[cxy - 0.5 * size[:2], bed]
+    s_hi = np.r_[cxy + 0.5 * size[:2], bed + size[2]]
+    sh = cfg.shoulders
+    if sh.fill:
+        top_fill = sh.height if sh.height is not None else s_hi[2]
+        mat = ctx.case.materials[sh.material]
+        solids = 0.0
+        regions = []
+        for side in (0, 1):  # along x: before and after the sleeper
+            r_lo = np.r_[lo[0] if side == 0 else s_hi[0] + sh.gap, lo[1], bed]
+            r_hi = np.r_[s_lo[0] - sh.gap if side == 0 else hi[0], hi[1], top_fill]
+            if r_hi[0] - r_lo[0] > 0:
+                regions.append((r_lo, r_hi))
+                solids += float(np.prod(r_hi - r_lo)) * sh.bulk_density / mat.density
+        # the two sides get their share of the solids, placed above everything under them
+        for r_lo, r_hi in regions:
+            share = solids * float(np.prod(r_hi - r_lo)) / sum(float(np.prod(b - a)) for a, b in regions)
+            base = _top_in(groups, r_lo, r_hi) + sh.clearance
+            groups = shoulder_ballast(ctx, groups, state_in, np.r_[r_lo[:2], base], np.r_[r_hi[:2], base + 1.0],
+                                      share, sh.material, sh.clearance, sh.tries, sh.slide)
+    mats = list(ctx.case.materials)
+    centre = np.r_[cxy, bed + sl.drop + 0.5 * size[2]]
+    groups = add_actor(groups, box_polyhedron(size), centre, ctx.case.materials[sl.material].density,
+                       mats.index(sl.material), "sleeper", load=_load_row(cfg.load, cfg.load.settle))
+    b = actor_index(groups, "sleeper")
+
+    def measure(system):
+        return {"sleeper": float(system.x[b, 2])}
+
+    def finish(ctx_, system, state, cyc):
+        from demcli.state import RecordTable
+
+        rows = cyc.to_arrays()
+        out = RecordTable("settlement", {"cycle": "1", "sleeper": "m", "settlement": "m"})
+        for c, z in zip(rows["cycle"], rows["sleeper"]):
+            out.append(cycle=int(c), sleeper=float(z), settlement=float(rows["sleeper"][0] - z))
+        out.to_state(state)
+        ctx_.write_records(out, x="cycle", ys=["settlement"])
+        if len(rows["cycle"]):
+            ctx_.log(f"accumulated sleeper settlement after {int(rows['cycle'][-1])} cycles: "
+                     f"{(rows['sleeper'][0] - rows['sleeper'][-1]) * 1e3:.3f} mm")
+
+    return _cyclic(ctx, cfg, _state_with(ctx, state_in, groups), "sleeper", measure, {"sleeper": "m"},
+                   finish_extra=finish)
+
+
+def _top_in(groups, lo, hi):
+    """Highest particle point above the (x, y) rectangle lo-hi [m] (the box floor if none)."""
+    from demcli.state import State
+    from demcli.state.polyhedra import world_vertices
+
+    v, owner = world_vertices(State(groups=groups))
+    v = v[owner < len(particles(groups))]
+    m = (v[:, 0] >= lo[0]) & (v[:, 0] <= hi[0]) & (v[:, 1] >= lo[1]) & (v[:, 1] <= hi[1])
+    return float(v[m, 2].max()) if m.any() else float(lo[2])
+
+
+# ---------------------------------------------------------------------------------------
+# registration
+# ---------------------------------------------------------------------------------------
+
+DEPOSIT = dict(dem.FIELDS)
+
+VIBRATE = _dem_fields()
+VIBRATE.update({
+    "plate": Section({
+        "material": Str(doc="material of the plate (density, stiffness)"),
+        "size": Optional(Vector(3, "m"), doc="plate edges x, y, z (default: the box floor less gap, x thickness)"),
+        "gap": Float("m", min=0, default="10 mm", doc="default size: clearance to the box walls on each side"),
+        "thickness": Float("m", min=0, min_inclusive=False, default="50 mm"),
+        "clearance": Float("m", min=0, default="2 mm", doc="laid this far above the highest particle"),
+    }),
+    "load": LOAD,
+    "cycles": Int(min=1, doc="load cycles (seed: 45)"),
+    "target_density": Optional(Float("kg/m^3", min=0, min_inclusive=False),
+                               doc="stop at the first cycle end where the bulk density reaches it (seed: 1.55 g/cm^3)"),
+})
+
+SLEEPER = _dem_fields()
+SLEEPER.update({
+    "sleeper": Section({
+        "material": Str(),
+        "size": Vector(3, "m", doc="edges x (width along the box), y (length across it), z (height)"),
+        "centre": Optional(Vector(2, "m"), doc="(x, y) of the centre (default: the box centre)"),
+        "drop": Float("m", min=0, default="2 mm", doc="set this far above the bed surface (the plate's underside)"),
+    }),
+    "shoulders": Section({
+        "fill": Bool(default=True, doc="fill the box beside the sleeper with ballast"),
+        "material": Str(doc="material of the shoulder ballast"),
+        "height": Optional(Float("m"), doc="fill up to this height (default: the sleeper's top)"),
+        "bulk_density": Float("kg/m^3", min=0, min_inclusive=False, default="1.55 g/cm^3",
+                              doc="solids placed = shoulder volume x this / particle density"),
+        "gap": Float("m", min=0, default="5 mm", doc="kept free beside the sleeper while stacking"),
+        "clearance": Float("m", min=0, default="2 mm"),
+        "tries": Int(min=1, default=8),
+        "slide": Int(min=0, default=8),
+    }),
+    "load": LOAD,
+    "cycles": Int(min=1, doc="load cycles (seed: 80)"),
+})
+
+
+def _describe(kind):
+    def describe(cfg, case):
+        plan = dem.plan_summary(case, cfg, {"polyhedra": True})
+        lines = plan.describe().splitlines()
+        if kind != "deposit":
+            ld = cfg.load
+            lines.append(f"load {ld.min / 1e3:g}-{ld.max / 1e3:g} kN at {ld.frequency:g} Hz, {cfg.cycles} cycles "
+                         f"after {ld.settle:g} s at the minimum")
+        sc = cfg.scaling
+        if sc.stiffness != 1.0 or sc.mass != 1.0:
+            lines.append(f"scaling: stiffness x {sc.stiffness:g}, mass x {sc.mass:g} "
+                         f"(time step x {math.sqrt(sc.mass / sc.stiffness):.3g})")
+        lines.append("time step: decided at run time from the bodies of the input state")
+        return "\n".join(lines)
+    return describe
+
+
+_REQ = ("bodies/x", "polyhedra/shape")
+register_stage(StageType("deposit", DEPOSIT, run_deposit, requires=_REQ, check=_check_deposit,
+                         describe=_describe("deposit"),
+                         doc="gravity deposition of a polyhedral bed until at rest; bulk density and porosity"))
+register_stage(StageType("vibrate", VIBRATE, run_vibrate, requires=_REQ, check=_check_cyclic,
+                         describe=_describe("vibrate"),
+                         doc="plate vibration compaction: density and void ratio per cycle (seed 002)"))
+register_stage(StageType("sleeper", SLEEPER, run_sleeper, requires=_REQ, check=_check_cyclic,
+                         describe=_describe("sleeper"),
+                         doc="sleeper on the compacted bed, shoulders filled, cyclic load: settlement per cycle"))

@@ -1,0 +1,241 @@
+"""The ballast box stages (deposit, vibrate, sleeper; seed 002 sec. 4) on the smoke chain,
+their measures against hand computations, and the cost knobs (stiffness and mass scaling).
+"""
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from demcli import run_case
+from demcli.cli import cli
+from demcli.state import read_state
+
+ROOT = Path(__file__).resolve().parents[2]
+SMOKE = ROOT / "cases" / "smoke" / "ballast_box.yaml"
+sys.path.insert(0, str(ROOT / "tests" / "engine"))
+
+
+@pytest.fixture(scope="module")
+def chain(tmp_path_factory):
+    out = tmp_path_factory.mktemp("ballast_box")
+    run_case(SMOKE, out=out, quiet=True)
+    return out
+
+
+def _csv(path):
+    """Columns of a record CSV by name (units in the header dropped)."""
+    import csv
+
+    with open(path) as f:
+        rows = list(csv.reader(line for line in f if not line.startswith("#")))
+    names = [h.split("[")[0] for h in rows[0]]
+    return {n: np.array([float(r[k]) for r in rows[1:]]) for k, n in enumerate(names)}
+
+
+def _mass_and_density(st):
+    vol = st["polyhedron_shapes/volume"][st["polyhedra/shape"]]
+    n = len(vol) if "actors/body" not in st else int(st["actors/body"].min())
+    return float(vol[:n].sum() * 2600.0)
+
+
+def test_deposit_comes_to_rest_and_measures_the_bed(chain):
+    st = read_state(chain / "03-deposit.h5")
+    # Then: the bed group holds rho_b = M / (A h), n = 1 - rho_b / rho_s, e = n / (1 - n) (hand formulas)
+    m = _mass_and_density(st)
+    h = float(st["bed/height"])
+    assert float(st["bed/particle_mass"]) == pytest.approx(m, rel=1e-12)
+    assert float(st["bed/bulk_density"]) == pytest.approx(m / (0.24 * 0.15 * h), rel=1e-12)
+    n = float(st["bed/porosity"])
+    assert n == pytest.approx(1.0 - float(st["bed/bulk_density"]) / 2600.0, rel=1e-12)
+    assert float(st["bed/void_ratio"]) == pytest.approx(n / (1.0 - n), rel=1e-12)
+    # and the bed is a bed: below the loose stack it fell from (0.30 m), porosity of a loose
+    # packing of angular particles in a narrow box (measured 0.59)
+    assert 0.3 < n < 0.75 and h < 0.3
+    # and the gradation and library travel on for the shoulder fill
+    assert "gradation/class_amount" in st and "path" in st.group_attrs["library"]
+
+
+def test_vibrate_records_density_per_cycle_under_the_plate(chain):
+    st = read_state(chain / "04-vibrate.h5")
+    csv = chain / "records" / "vibrate_cycles.csv"
+    assert csv.exists() and (chain / "records" / "vibrate_cycles_density.png").exists()
+    rows = _csv(csv)
+    # Then: one row at the start of the cycles and one after each cycle (1 here)
+    assert list(rows["cycle"]) == [0, 1]
+    # and the density is the particle mass over the box floor times the plate's underside height
+    plate = int(st["actors/body"][0])
+    assert str(st["actors/name"][0]) in ("plate", "b'plate'")
+    m = _mass_and_density(st)
+    zb = float(rows["plate"][-1]) - 0.025
+    assert rows["bulk_density"][-1] == pytest.approx(m / (0.24 * 0.15 * zb), rel=1e-9)
+    assert float(st["bodies/x"][plate, 2]) == pytest.approx(rows["plate"][-1], rel=1e-12)
+    # and the plate moved along z only: its x, y are the box centre, its attitude as laid
+    assert st["bodies/x"][plate, 0] == pytest.approx(0.12, abs=1e-12)
+    assert st["bodies/x"][plate, 1] == pytest.approx(0.075, abs=1e-12)
+    # and a load cycle compacts the loose bed (measured 0.85 -> 0.99 g/cm^3)
+    assert rows["bulk_density"][-1] > rows["bulk_density"][0]
+
+
+def test_sleeper_fills_the_shoulders_and_records_settlement(chain):
+    vib = read_state(chain / "04-vibrate.h5")
+    st = read_state(chain / "05-sleeper.h5")
+    # Then: the plate is gone, a sleeper is the last body, shoulder ballast was added
+    assert [str(n).strip("b'") for n in st["actors/name"]] == ["sleeper"]
+    n_before = int(vib["actors/body"][0])
+    n_after = int(st["actors/body"][0])
+    assert n_after > n_before and len(st["bodies/mass"]) == n_after + 1
+    # the shoulder particles rest beside the sleeper, inside the box
+    sl = n_after
+    new = st["bodies/x"][n_before:n_after]
+    assert np.all(np.abs(new[:, 0] - st["bodies/x"][sl, 0]) > 0.03 - 1e-3)
+    assert np.all((new[:, :2] > 0) & (new[:, :2] < [0.24, 0.15]))
+    # and the settlement record starts at 0 and is the sleeper's descent since the cycles began
+    rows = _csv(chain / "records" / "sleeper_settlement.csv")
+    assert list(rows["cycle"]) == [0, 1] and rows["settlement"][0] == 0.0
+    assert rows["settlement"][-1] == pytest.approx(rows["sleeper"][0] - rows["sleeper"][-1], rel=1e-12)
+    assert rows["sleeper"][-1] == pytest.approx(float(st["bodies/x"][sl, 2]), rel=1e-12)
+    # the sleeper sinks under the cyclic load (measured 3.7 mm after one cycle)
+    assert rows["settlement"][-1] > 0.0
+    assert (chain / "records" / "sleeper_settlement.png").exists()
+    assert any((chain / "sleeper").glob("*.pvd"))
+
+
+def test_cycle_timing_gives_whole_cycles_of_whole_records():
+    from demcli.config.schema import Node
+    from demcli.stages.ballast_box import cycle_timing
+
+    load = Node({"frequency": 10.0, "settle": 0.013, "min": 0.0, "max": 1.0})
+    dt, total, rec = cycle_timing(load, cycles=7, records_per_cycle=4, dt=3.3e-5)
+    spc = 4 * rec
+    # Then: dt no larger than asked, a cycle is exactly spc steps, the settle rounded up to records
+    assert dt <= 3.3e-5 and dt * spc * 10.0 == pytest.approx(1.0, rel=1e-14)
+    settle = total - 7 * spc
+    assert settle % rec == 0 and settle * dt >= 0.013 and (settle - rec) * dt < 0.013
+
+
+def test_bed_measures_and_surface_height_of_a_known_layer():
+    from demcli.engine.poly_system import polyhedra_groups
+    from demcli.stages.ballast_box import bed_measures, surface_height
+    from test_polyhedra_dynamics import box
+
+    # Given: a 3 x 2 layer of 5 cm cubes on the floor of a 15 x 10 cm box
+    polys = [box(0.05, 0.05, 0.05) for _ in range(6)]
+    x = [[0.025 + 0.05 * i, 0.025 + 0.05 * j, 0.025] for i in range(3) for j in range(2)]
+    g = polyhedra_groups(polys, 2600.0, x=x)
+    # Then: the surface is at 5 cm and the layer is solid (porosity 0)
+    h = surface_height(g, np.zeros(3), np.array([0.15, 0.1, 1.0]), 0.025)
+    assert h == pytest.approx(0.05, abs=1e-12)
+    m = bed_measures(6 * 0.05 ** 3 * 2600.0, 2600.0, 0.015, h)
+    assert m["porosity"] == pytest.approx(0.0, abs=1e-12) and m["bulk_density"] == pytest.approx(2600.0)
+    m = bed_measures(1000.0, 2600.0, 1.0, 1.0)
+    assert m["porosity"] == pytest.approx(1 - 1000 / 2600) and m["void_ratio"] == pytest.approx(1600 / 1000)
+
+
+def test_mass_scaling_keeps_weights_and_gives_back_real_masses():
+    from demcli.engine.actors import haversine
+    from test_actors import _cube_under_plate, _scene
+
+    g = _cube_under_plate(load=haversine(500.0, 500.0, 0.0))
+    a = _scene(g)
+    b = _scene(g, mass_scale=16.0)
+    # Then: the critical step grows by sqrt(16), the stored masses are the real ones, bit for bit
+    assert b.critical_dt() == pytest.approx(4.0 * a.critical_dt(), rel=1e-12)
+    gb = b.groups()["bodies"]
+    np.testing.assert_array_equal(gb["mass"], g["bodies"]["mass"])
+    np.testing.assert_array_equal(gb["inertia"], g["bodies"]["inertia"])
+    # and the statics are unchanged: the floor carries the real weights plus 500 N (within 0.1 %)
+    b.advance(12000)
+    f = []
+    for _ in range(20):
+        b.advance(100)
+        f.append(-b.wforce[0, 2])
+    assert np.mean(f) == pytest.approx(float(g["bodies"]["mass"].sum()) * 9.81 + 500.0, rel=1e-3)
+
+
+def test_stiffness_scaling_changes_only_the_moduli():
+    # Given: the smoke deposit planned with scaling.stiffness 0.01
+    from demcli.config.case import load_case
+    from demcli.stages import dem
+
+    case = load_case(SMOKE, ["stages.3.scaling.stiffness=0.01"])
+    cfg = case.stages[3]
+    mats = dem.case_materials(case, cfg.scaling.stiffness)
+    # Then: every Young's modulus is scaled, nothing else
+    for m, (name, ref) in zip(mats, case.materials.items()):
+        assert m.young == pytest.approx(ref.young * 0.01, rel=1e-15) and m.density == ref.density
+
+
+@pytest.mark.parametrize("override, rule", [
+    ("stages.4.load.max=-1", "must be"),
+    ("stages.3.scaling.mass=3", "power of 2"),
+    ("stages.4.walls=[]", "box wall"),
+])
+def test_bad_ballast_box_input_is_reported(override, rule):
+    result = CliRunner().invoke(cli, ["check", str(SMOKE), "--set", override])
+    assert result.exit_code == 2, result.output
+    assert rule in result.output
+
+
+def test_compare_overlays_the_runs_records(chain, tmp_path):
+    import shutil
+
+    # Given: the smoke run and a copy of it under another name
+    other = tmp_path / "other_run"
+    shutil.copytree(chain / "records", other / "records")
+    # When: demcli compare draws the seed's figures
+    result = CliRunner().invoke(cli, ["compare", str(chain), str(other), "--out", str(tmp_path / "cmp")])
+    assert result.exit_code == 0, result.output
+    # Then: one PNG and one CSV per figure column, each CSV holding both runs' curves as recorded
+    for stem in ("vibrate_cycles_bulk_density", "vibrate_cycles_void_ratio", "sleeper_settlement_settlement"):
+        assert (tmp_path / "cmp" / f"{stem}.png").exists()
+    lines = (tmp_path / "cmp" / "sleeper_settlement_settlement.csv").read_text().splitlines()
+    src = _csv(chain / "records" / "sleeper_settlement.csv")
+    runs = [line.split(",")[0] for line in lines[1:]]
+    assert runs == [chain.name] * len(src["cycle"]) + ["other_run"] * len(src["cycle"])
+    assert [float(line.split(",")[2]) for line in lines[1:]][:len(src["cycle"])] == src["settlement"].tolist()
+    # and a folder without records is a clear input error (exit 2)
+    bad = CliRunner().invoke(cli, ["compare", str(tmp_path / "cmp")])
+    assert bad.exit_code == 2 and "not a run folder" in bad.output
+
+
+def test_interrupted_sleeper_stage_resumes_bit_identically(chain, tmp_path, monkeypatch):
+    import shutil
+
+    import h5py
+
+    from demcli.engine import poly_system
+    from demcli.errors import StageError
+
+    # Given: the smoke chain up to the vibrated bed, and its sleeper stage interrupted (Ctrl-C)
+    # during the load cycle (shoulders filled, sleeper and shoulder particles moving)
+    for f in chain.iterdir():
+        if f.name[:2] in ("00", "01", "02", "03", "04"):
+            shutil.copy(f, tmp_path / f.name)
+    real = poly_system.PolySystem.advance
+
+    def interrupted(self, n):
+        if self.step >= 12000:
+            raise KeyboardInterrupt
+        return real(self, n)
+
+    monkeypatch.setattr(poly_system.PolySystem, "advance", interrupted)
+    with pytest.raises(StageError, match="interrupted"):
+        run_case(SMOKE, out=tmp_path, quiet=True)
+    assert (tmp_path / "05-sleeper.ckpt.h5").exists()
+    # When: it is resumed
+    monkeypatch.setattr(poly_system.PolySystem, "advance", real)
+    run_case(SMOKE, out=tmp_path, quiet=True, resume=True)
+
+    # Then: the sleeper state equals the uninterrupted run's, dataset for dataset
+    def datasets(path):
+        out = {}
+        with h5py.File(path, "r") as f:
+            f.visititems(lambda name, obj: out.__setitem__(name, obj[()]) if isinstance(obj, h5py.Dataset) else None)
+        return out
+
+    a, b = datasets(chain / "05-sleeper.h5"), datasets(tmp_path / "05-sleeper.h5")
+    assert sorted(a) == sorted(b)
+    assert [k for k in a if not np.array_equal(np.asarray(a[k]), np.asarray(b[k]))] == []
