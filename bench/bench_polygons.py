@@ -128,11 +128,9 @@ def markdown(rows, max_tries, seeds, ac13, started):
 
 
 def write_doc(text, path=ROOT / "docs" / "polygons.md"):
-    doc = path.read_text(encoding="utf-8")
-    head, rest = doc.split(BEGIN, 1)
-    _, tail = rest.split(END, 1)
-    path.write_text(head + BEGIN + "\n" + text + "\n" + END + tail, encoding="utf-8")
-    print(f"written to {path.relative_to(ROOT)}")
+    from doc_section import write_section
+
+    write_section(path, BEGIN, END, text)
 
 
 def main(argv=None):

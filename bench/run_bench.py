@@ -11,8 +11,9 @@ time), the peers' sphere scenes (default: dense, N = 10000, 20000 steps, dt = 1e
   when their binaries are on PATH; otherwise it says how to install them and goes on.
 
 Then a scaling row (demcli, 1 thread, dense, N = 1e3, 1e4, 1e5 [1e6 with --big], the same
-number of steps for every N: the cost per particle-step should stay flat), and the geometry
-toolkit's bench/bench_sieve.py when it exists.
+number of steps for every N: the cost per particle-step should stay flat), the geometry
+toolkit's bench/bench_sieve.py when it exists, and the 3D asphalt Marshall pipeline's wall time per
+stage against the lattice ball size (bench/bench_asphalt.py).
 
 Every run is a separate process whose LAST line is ``particle_steps_per_s=<number>``.
 The table (runs, median, ratio to LIGGGHTS) is printed and written to bench/results.md
@@ -20,6 +21,7 @@ The table (runs, median, ratio to LIGGGHTS) is printed and written to bench/resu
 
 Usage: python bench/run_bench.py [--quick] [--scenes dense_10000,drop_10000] [--repeat K]
                                  [--skip-peers] [--skin S] [--peer-skin M] [--big]
+                                 [--no-asphalt] [--asphalt-spacings 2.0,1.4,1.0,0.7]
 """
 
 import argparse
@@ -78,6 +80,11 @@ def parse_args(argv=None):
                     help="steps of every scaling run (default 2000; --quick: 200)")
     ap.add_argument("--big", action="store_true", help="add N = 1e6 to the scaling row (~2 GB, minutes per run)")
     ap.add_argument("--no-sieve", action="store_true", help="leave out bench/bench_sieve.py")
+    ap.add_argument("--no-asphalt", action="store_true",
+                    help="leave out bench/bench_asphalt.py (3D Marshall pipeline against the lattice ball size)")
+    ap.add_argument("--asphalt-spacings", default=None,
+                    help="lattice ball diameters in mm for bench/bench_asphalt.py, comma list "
+                         "(default its own: 2.0,1.4,1.0,0.7, a few minutes; --quick: 2.0,1.5)")
     ap.add_argument("--out", default=None, help="results file (default bench/results.md; --quick: none)")
     a = ap.parse_args(argv)
     if a.scenes is None:
@@ -369,6 +376,35 @@ def run_sieve(quick):
     return " ".join(shlex.quote(c) for c in ["python"] + cmd[1:]).replace(ROOT + "/", ""), text
 
 
+ASPHALT_BLOCK = re.compile(r"<!-- bench_asphalt:begin -->\n(.*?)\n<!-- bench_asphalt:end -->", re.S)
+
+
+def run_asphalt(a):
+    """bench/bench_asphalt.py: (command, markdown block or a FAILED line)."""
+    path = os.path.join(HERE, "bench_asphalt.py")
+    if not os.path.exists(path):
+        return None
+    cmd = [sys.executable, path] + (["--quick"] if a.quick else []) + \
+        (["--spacings", a.asphalt_spacings] if a.asphalt_spacings else [])
+    print(f"  [{time.strftime('%H:%M:%S')}] {os.path.relpath(path, ROOT)} (load {load()}) ...", flush=True)
+    try:
+        out = subprocess.run(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                             timeout=a.timeout)
+        text, rc = out.stdout, out.returncode
+    except subprocess.TimeoutExpired as e:
+        text = e.stdout.decode(errors="replace") if isinstance(e.stdout, bytes) else (e.stdout or "")
+        rc = f"killed after {a.timeout:.0f} s"
+    lines = [ln for ln in text.splitlines() if ln.strip()]
+    for ln in lines:
+        if ln.startswith("  ["):
+            print("  " + ln.strip(), flush=True)
+    m = ASPHALT_BLOCK.search(text)
+    ok = rc == 0 and m is not None and lines and lines[-1].startswith("asphalt_compact_exponent=")
+    block = m.group(1) if ok else f"FAILED (rc={rc}): " + " | ".join(lines[-3:])[-300:]
+    print("  " + (lines[-1] if ok else block), flush=True)
+    return " ".join(shlex.quote(c) for c in ["python"] + cmd[1:]).replace(ROOT + "/", ""), block
+
+
 def main(argv=None):
     a = parse_args(argv)
     import demcli  # the venv's demcli (version line only)
@@ -426,6 +462,7 @@ def main(argv=None):
                 run_entry(e, k)
 
     sieve = None if a.no_sieve else run_sieve(a.quick)
+    asphalt = None if a.no_asphalt else run_asphalt(a)
     # 2D sections; ballast library build rate; polyhedron narrow phase; the peers' poly scene
     quick_args = {"bench_polygons.py": ["--quick"], "bench_library.py": ["--quick"], "bench_polyhedra.py": [],
                   "bench_poly.py": ["--n", "100", "--steps", "1000"]}
@@ -461,6 +498,9 @@ def main(argv=None):
         md += scaling_table(scaling, a.repeat)
     if sieve:
         md += ["", f"Geometry toolkit: `{sieve[0]}`: {sieve[1]}"]
+    if asphalt:
+        md += ["", f"3D asphalt, Marshall pipeline against the lattice ball size (`{asphalt[0]}`; "
+                   "see docs/asphalt3d.md, \"Cost against ball size\"):", "", asphalt[1]]
     fails = [(e, r) for e in flat + scaling for r in e.runs if r["rate"] is None]
     if fails:
         md += ["", "Failed runs:"] + [f"- {e.scene} {e.label()}: {r['error']}" for e, r in fails]

@@ -106,9 +106,13 @@ N_LOAD = 9
 
 # positions in the neighbour-state tuple ``nl`` of :func:`run_poly_steps`
 PNL_FIELDS = ("start", "pi", "pj", "rstart", "rlist", "ft", "fc", "tj", "act", "epair", "geo",
-              "wstart", "wbody", "wwall", "wft", "wfc", "wgeo", "xref", "wref")
+              "wstart", "wbody", "wwall", "wft", "wfc", "wgeo", "xref", "wref", "sep")
 (P_START, P_PI, P_PJ, P_RSTART, P_RLIST, P_FT, P_FC, P_TJ, P_ACT, P_EPAIR, P_GEO,
- P_WSTART, P_WBODY, P_WWALL, P_WFT, P_WFC, P_WGEO, P_XREF, P_WREF) = range(len(PNL_FIELDS))
+ P_WSTART, P_WBODY, P_WWALL, P_WFT, P_WFC, P_WGEO, P_XREF, P_WREF, P_SEP) = range(len(PNL_FIELDS))
+# sep[c] (int32), a cached separating face of pair c: 0 unknown, k + 1 face k of body i,
+# -(k + 1) face k of body j, SEP_NONE no face separates (edge-edge: overlap() every step)
+SEP_NONE = -(2 ** 30)
+SEP_MARGIN = 1e-9  # a cached face must clear the other body by this x (r_i + r_j) + 1e-12 max |x|
 # columns of geo / wgeo (per contact, last evaluation): depth d [m], elastic normal force F_N [N],
 # tangential stiffness K_t [N/m]
 G_DEPTH, G_FN, G_KT = 0, 1, 2
@@ -226,14 +230,55 @@ def _world_geometry(x, q, shape, vertex_start, vertices, face_start, face_normal
                         wnorm[bfstart[b]:bfstart[b + 1]], woff[bfstart[b]:bfstart[b + 1]])
 
 
+@njit(inline="always")
+def _clearance(n, d, verts):
+    """min over ``verts`` of n_f . v - d_f for every face f of (n, d): the largest is the
+    widest gap a face plane of one body leaves to the other body; returns (gap, face)."""
+    best = -math.inf
+    bf = -1
+    for f in range(n.shape[0]):
+        g = math.inf
+        for k in range(verts.shape[0]):
+            t = n[f, 0] * verts[k, 0] + n[f, 1] * verts[k, 1] + n[f, 2] * verts[k, 2] - d[f]
+            if t < g:
+                g = t
+                if g <= best:
+                    break
+        if g > best:
+            best = g
+            bf = f
+    return best, bf
+
+
+@njit(inline="always")
+def _still_separated(code, na, da, va, nb_, db_, vb, margin):
+    """Whether the cached face ``code`` (see P_SEP) still clears the other body by ``margin``."""
+    if code > 0:
+        f = code - 1
+        n = na
+        d = da
+        verts = vb
+    else:
+        f = -code - 1
+        n = nb_
+        d = db_
+        verts = va
+    for k in range(verts.shape[0]):
+        if n[f, 0] * verts[k, 0] + n[f, 1] * verts[k, 1] + n[f, 2] * verts[k, 2] - d[f] <= margin:
+            return False
+    return True
+
+
 @njit(parallel=True)
 def _pair_forces(start, pj, x, v, w, mass, rad, bmat, prm, sw, dt,
                  shape, vertex_start, face_start, fvstart, fverts, bvstart, bfstart, wvert, wnorm, woff,
-                 ft, fc, tj, act, epair, geo, frow, trow, erow):
+                 ft, fc, tj, act, epair, geo, frow, trow, erow, sep):
     """Force of every listed pair into its own row; the row owner i sums its side.
 
     fc[c]: force on i [N]; tj[c]: torque on j [N m]; geo[c]: (depth, F_N, K_t);
     epair[c]: (dashpot, slip) losses this step [J]; frow/trow/erow[i]: i's sums.
+    sep[c]: the cached separating face (P_SEP): a pair still cleared by it skips the
+    exact overlap, which would find V = 0 (the results do not depend on the cache).
     """
     friction = sw[S_FRICTION]
     energy = sw[S_ENERGY]
@@ -275,11 +320,31 @@ def _pair_forces(start, pj, x, v, w, mass, rad, bmat, prm, sw, dt,
                 gx = gy = gz = sx = sy = sz = 0.0
                 if dx * dx + dy * dy + dz * dz < rs * rs:
                     kj = shape[j]
-                    vol, gx, gy, gz, sx, sy, sz = overlap(
-                        va, fsa, fverts, offa, na, da, xi0, xi1, xi2, ri,
-                        wvert[bvstart[j]:bvstart[j + 1]], fvstart[face_start[kj]:face_start[kj + 1] + 1], fverts,
-                        vertex_start[kj], wnorm[bfstart[j]:bfstart[j + 1]], woff[bfstart[j]:bfstart[j + 1]],
-                        xj0, xj1, xj2, rj)
+                    vb = wvert[bvstart[j]:bvstart[j + 1]]
+                    nb_ = wnorm[bfstart[j]:bfstart[j + 1]]
+                    db_ = woff[bfstart[j]:bfstart[j + 1]]
+                    code = sep[c]
+                    margin = SEP_MARGIN * rs + 1e-12 * max(abs(xi0), abs(xi1), abs(xi2), abs(xj0), abs(xj1),
+                                                          abs(xj2))
+                    if code != 0 and code != SEP_NONE and _still_separated(code, na, da, va, nb_, db_, vb,
+                                                                           margin):
+                        vol = 0.0
+                    else:
+                        vol, gx, gy, gz, sx, sy, sz = overlap(
+                            va, fsa, fverts, offa, na, da, xi0, xi1, xi2, ri,
+                            vb, fvstart[face_start[kj]:face_start[kj + 1] + 1], fverts,
+                            vertex_start[kj], nb_, db_, xj0, xj1, xj2, rj)
+                        if not vol > 0.0 and code != SEP_NONE:
+                            ga, fa = _clearance(na, da, vb)
+                            gb, fb = _clearance(nb_, db_, va)
+                            if ga > margin and ga >= gb:
+                                sep[c] = fa + 1
+                            elif gb > margin:
+                                sep[c] = -(fb + 1)
+                            else:
+                                sep[c] = SEP_NONE
+                        elif vol > 0.0:
+                            sep[c] = 0
                 if not vol > 0.0:
                     if act[c]:
                         act[c] = 0
@@ -679,7 +744,7 @@ def run_poly_steps(nsteps, time, dt, sw, prm, gravity, local, visc, adamp,
     vertex_start, vertices, face_start, fvstart, fverts, face_normal, face_offset = shapes
     wvert, wnorm, woff = world
     (start, pi, pj, rstart, rlist, ft, fc, tj, act, epair, geo,
-     wstart, wbody, wwall, wft, wfc, wgeo, xref, wref) = nl
+     wstart, wbody, wwall, wft, wfc, wgeo, xref, wref, sep) = nl
     friction = sw[S_FRICTION]
     energy = sw[S_ENERGY]
     adaptive = sw[S_ADAPTIVE]
@@ -725,6 +790,7 @@ def run_poly_steps(nsteps, time, dt, sw, prm, gravity, local, visc, adamp,
             act = np.zeros(npair, np.uint8)
             epair = np.zeros((npair if energy else 0, 2))
             geo = np.zeros((npair, 3))
+            sep = np.zeros(npair, np.int32)
             if nw > 0:
                 nws, nwb, nww = build_wall_pairs(x, rad, skin, wkind, wpoint, wnormal, wradius)
                 nq = nww.shape[0]
@@ -740,7 +806,7 @@ def run_poly_steps(nsteps, time, dt, sw, prm, gravity, local, visc, adamp,
                         bvstart, bfstart, wvert, wnorm, woff)
         _pair_forces(start, pj, x, v, w, mass, rad, bmat, prm, sw, h,
                      shape, vertex_start, face_start, fvstart, fverts, bvstart, bfstart, wvert, wnorm, woff,
-                     ft, fc, tj, act, epair, geo, frow, trow, erow)
+                     ft, fc, tj, act, epair, geo, frow, trow, erow, sep)
         counters[C_PAIRS] += 1
         if friction:
             counters[C_FRICTION] += 1
@@ -780,7 +846,7 @@ def run_poly_steps(nsteps, time, dt, sw, prm, gravity, local, visc, adamp,
             if status != OK:
                 break
     nl = (start, pi, pj, rstart, rlist, ft, fc, tj, act, epair, geo,
-          wstart, wbody, wwall, wft, wfc, wgeo, xref, wref)
+          wstart, wbody, wwall, wft, wfc, wgeo, xref, wref, sep)
     return status, n, time, nl
 
 

@@ -13,7 +13,9 @@ Reads the ``seeds`` of a ``place_spheres`` stage and the ``gradation`` targets, 
    [``planes.ratio.min``, ``flat_elongated.ratio``) for the rest; d_mid uniform between;
 3. the lattice balls whose centres (``membership: centre``) or whole balls (``whole``)
    lie inside the sphere and all six planes become one rigid clump; balls in no
-   polyhedron are deleted;
+   polyhedron are deleted; a seed that catches no ball, or sieves as dropped fines, is cut
+   again with fresh planes of its drawn kind (up to ``REDRAW_MAX`` times), so that the kept
+   aggregates hold the drawn flat/elongated share;
 4. sieves every clump (projection method, ``demcli.geometry.carving.lattice_clump_sieve_size``)
    into the gradation's classes (lower < size <= upper; below the smallest class: fines,
    dropped by default since finer material belongs to the mastic), compares the class
@@ -92,6 +94,10 @@ def _check(node, report):
                fe.ratio)
 
 
+REDRAW_MAX = 100  # further cuts of a seed that caught no ball or sieved as fines (see Carver.carve)
+FE_Z = 3.29  # the flat/elongated share of the kept aggregates is checked against a 99.9 % binomial band
+
+
 class Carver:
     """The growing set of seeds, their cutting planes and the lattice labels."""
 
@@ -116,8 +122,10 @@ class Carver:
         self.size = np.full(n, math.nan)
         self.size_class = np.full(n, -2, np.int64)
         self.count = np.zeros(n, np.int64)
+        self.fe = np.zeros(n, bool)  # drawn flat/elongated (kept when a seed is cut again)
         self.v_el = element_volume(lattice.spacing, cfg.mass_model)
         self.sieve_seconds = 0.0
+        self.recuts = 0  # cuts after a seed's first (see carve)
 
     @property
     def mass(self):
@@ -139,10 +147,35 @@ class Carver:
         self.size = np.r_[self.size, np.full(m, math.nan)]
         self.size_class = np.r_[self.size_class, np.full(m, -2, np.int64)]
         self.count = np.r_[self.count, np.zeros(m, np.int64)]
+        self.fe = np.r_[self.fe, np.zeros(m, bool)]
         return np.arange(k0, k0 + m)
 
     def carve(self, ids):
-        """Draw planes for seeds ``ids``, claim their balls, sieve them; returns the clash count."""
+        """Draw planes for seeds ``ids``, claim their balls, sieve them; returns the clash count.
+
+        A seed whose polyhedron catches no lattice ball, or sieves as fines that are dropped,
+        is cut again with fresh planes of the kind it was drawn (flat/elongated or regular),
+        up to ``REDRAW_MAX`` times. Thin shapes fail far more often than stocky ones (a
+        flat/elongated cut of a small seed is a layer or a row of balls, which passes the
+        smallest sieve), so without this the kept aggregates held about half the drawn
+        flat/elongated share (docs/asphalt3d.md). Seeds still failing after that are
+        dropped as before.
+        """
+        ids = np.asarray(ids, np.int64)
+        clash = 0
+        todo, kinds = ids, None
+        for attempt in range(REDRAW_MAX + 1):
+            if len(todo) == 0:
+                break
+            if attempt:
+                self.recuts += len(todo)
+            clash += self._cut(todo, kinds)
+            todo = todo[self.status[todo] >= 2]  # 2: no ball, 3: fines dropped (their balls are free again)
+            kinds = self.fe[todo]
+        return clash
+
+    def _cut(self, ids, kinds=None):
+        """One cut of seeds ``ids`` (``kinds``: their flat/elongated flags, None: drawn)."""
         from demcli.geometry.carving import (carve, lattice_clump_sieve_size, members_by_label, shape_planes,
                                              sieve_class)
 
@@ -151,9 +184,13 @@ class Carver:
         m = len(ids)
         if m == 0:
             return 0
-        normals, sp, _, rho, widths = shape_planes(self.rng, 2.0 * self.radius[ids], p.angle_min,
-                                                   (p.longest.min, p.longest.max), fe.share, fe.ratio,
-                                                   (p.ratio.min, p.ratio.max))
+        normals, sp, drawn, rho, widths = shape_planes(self.rng, 2.0 * self.radius[ids], p.angle_min,
+                                                       (p.longest.min, p.longest.max), fe.share, fe.ratio,
+                                                       (p.ratio.min, p.ratio.max), fe=kinds)
+        self.fe[ids] = drawn
+        self.status[ids] = 0
+        self.size[ids] = math.nan
+        self.size_class[ids] = -2
         self.normals[ids] = normals
         self.spacing[ids] = sp
         self.rho[ids] = rho
@@ -410,14 +447,20 @@ def run(ctx, cfg, state_in):
     fa = share[::-1] / target[::-1][0] if target[-1] > 0 else share[::-1]
     st = np.bincount(carver.status, minlength=5)
     ctx.log(f"{n_agg} aggregates of {len(members)} balls ({len(members) / lat.size:.1%} of the lattice); "
-            f"porosity {porosity:.4f}; {st[2]} seeds caught no ball, {st[3]} fines dropped, {st[4]} removed, "
-            f"{int((carver.round > 0).sum())} added")
+            f"porosity {porosity:.4f}; {st[2]} seeds caught no ball, {st[3]} fines dropped (after {carver.recuts} "
+            f"new cuts of such seeds, up to {REDRAW_MAX} each), {st[4]} removed, {int((carver.round > 0).sum())} added")
     ctx.log(f"class mass ratios (largest class first) {fmt(f'{v:.3f}' for v in f0)} before adjustment, "
             f"{fmt(f'{v:.3f}' for v in fa)} after, target {fmt(f'{v:.3g}' for v in norm_t)}; largest error "
             f"{100 * np.abs(err).max():.2f} % (tolerance {100 * tol:g} %); flat/elongated "
             f"{100 * aggregates['flat_elongated'].mean():.1f} % of the polyhedra (drawn "
             f"{100 * cfg.flat_elongated.share:g} %), {100 * ball_fe.mean():.1f} % by their balls' extents; "
             f"sieving {carver.sieve_seconds:.1f} s of {time.perf_counter() - t_start:.1f} s")
+    p_fe, fe_share = cfg.flat_elongated.share, float(aggregates["flat_elongated"].mean()) if n_agg else 0.0
+    band = FE_Z * math.sqrt(p_fe * (1 - p_fe) / max(n_agg, 1))
+    if n_agg and abs(fe_share - p_fe) > band:
+        ctx.log(f"warning: flat/elongated share of the aggregates {100 * fe_share:.1f} % is outside the binomial "
+                f"band {100 * p_fe:g} +- {100 * band:.1f} % of the drawn share: thin cuts of the smallest seeds "
+                f"rarely hold balls of {lat.spacing * 1e3:.3g} mm (see docs/asphalt3d.md); a finer lattice helps")
     return state
 
 

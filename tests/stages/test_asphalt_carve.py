@@ -216,3 +216,70 @@ def test_sieve_check_converges_to_the_target_class_ratios(tmp_path):
     # and the seeds record what became of each (carved, empty, fines, removed)
     status = st["seeds/status"]
     assert (status == 1).sum() == len(size_class) and set(np.unique(status)) <= {1, 2, 3, 4}
+
+
+MARSHALL_SMOKE = CASES / "smoke" / "marshall_ac13_3d.yaml"
+
+
+def _carve_many(tmp_path, share, name):
+    """The Marshall smoke recipe (AC-13 2.36-9.5 mm, 1.5 mm balls) carved in an 80 mm cube:
+    ~2 550 seed spheres, no DEM, no gradation adjustment (nothing removed at random)."""
+    import yaml
+
+    data = yaml.safe_load(MARSHALL_SMOKE.read_text())
+    data["stages"] = data["stages"][:3]
+    data["stages"][1]["region"]["max"] = ["80 mm"] * 3
+    data["stages"][2]["flat_elongated"] = {"share": share, "ratio": 3.0}
+    data["stages"][2]["adjust"] = {"mode": "none"}
+    path = tmp_path / f"{name}.yaml"
+    path.write_text(yaml.safe_dump(data))
+    run_case(path, out=tmp_path / name, quiet=True, threads=1)
+    return read_state(tmp_path / name / "02-carve.h5")
+
+
+# The band: n kept aggregates, each flat/elongated with probability p when the control holds, so
+# their F/E count is binomial(n, p); the test accepts |share - p| <= Z sqrt(p (1 - p) / n) with
+# Z = 3.29, a two-sided 99.9 % normal-approximation band (n p >= 240 here): +-2.0 points at p = 0.1,
+# +-3.1 points at p = 0.3 for n ~ 2 400. The seeds are fixed, so the test is deterministic; the band
+# says how far a correct control may land from p, not a flaky tolerance.
+Z_999 = 3.29
+
+
+@pytest.mark.parametrize("share", [0.1, 0.3])
+def test_flat_elongated_share_of_the_kept_aggregates_matches_the_control(tmp_path, share):
+    # Given >= 2 000 seed spheres carved by the stage (each a drawn set of three plane pairs),
+    # the smallest class (2.36-4.75 mm) only 1.6-3.2 balls across, so that thin cuts often
+    # catch no ball or sieve as fines
+    st = _carve_many(tmp_path, share, f"fe{share}")
+    status = st["seeds/status"]
+    assert len(status) >= 2000
+    flag = st["aggregates/flat_elongated"].astype(bool)
+    widths = st["aggregates/widths"]
+    n = len(flag)
+    assert n >= 2000
+    # Then the stage's classification is the drawn criterion on the carved polyhedra: width ratio
+    # max / min along the plane normals = the drawn ratio, flat/elongated from fe_ratio on
+    ratio = widths.max(axis=1) / widths.min(axis=1)
+    assert np.allclose(ratio, st["aggregates/drawn_ratio"], rtol=1e-6)
+    assert np.array_equal(flag, ratio >= 3.0)
+    # and the flat/elongated share among the kept aggregates (what a sample sieved from the
+    # specimen would show) is the drawn share, within the binomial band
+    band = Z_999 * math.sqrt(share * (1 - share) / n)
+    assert abs(flag.mean() - share) <= band, (flag.mean(), share, band)
+    # and a seed is dropped only after its cuts kept failing: few seeds end empty or as fines
+    assert np.isin(status, (2, 3)).mean() < 0.1
+
+
+def test_without_new_cuts_dropping_failed_seeds_thins_out_the_flat_elongated_share(tmp_path, monkeypatch):
+    # Given the same carving, but every seed cut once (the stage before the fix): a seed whose
+    # polyhedron catches no ball or sieves as fines is simply dropped
+    from demcli.stages import asphalt_carve
+
+    monkeypatch.setattr(asphalt_carve, "REDRAW_MAX", 0)
+    st = _carve_many(tmp_path, 0.3, "once")
+    flag = st["aggregates/flat_elongated"].astype(bool)
+    n = len(flag)
+    # Then thin (flat/elongated) cuts are dropped far more often than stocky ones, and the kept
+    # share falls well below the drawn 30 % (about 21 %): the bias the new cuts remove
+    assert flag.mean() < 0.3 - 2 * Z_999 * math.sqrt(0.3 * 0.7 / n)
+    assert np.isin(st["seeds/status"], (2, 3)).mean() > 0.2
