@@ -72,6 +72,38 @@ def compare(runs, record, x, ys, out):
 
 
 @cli.command()
+@click.argument("case", type=click.Path(dir_okay=False))
+@click.option("--vary", "varies", multiple=True, required=True, metavar="PATH=V1,V2,...",
+              help="Values of one case path (as --set takes them); several --vary make a grid.")
+@click.option("--metric", required=True, metavar="STAGE.TABLE.COLUMN[@REDUCER]",
+              help="Column of records/<stage>_<table>.csv, reduced by @last (default), @first, @max, @min or @mean.")
+@click.option("--reference", default="last", show_default=True, metavar="last|first|VARIANT",
+              help="The finest variant: each --vary's last or first value, or a variant's folder name.")
+@click.option("--set", "overrides", multiple=True, metavar="PATH=VALUE", help="Override a value in every variant.")
+@click.option("--out", type=click.Path(file_okay=False), help="Study folder (default studies/<case name>).")
+@click.option("--jobs", type=click.IntRange(min=1),
+              help="Variants run at once (default: free cores // threads per job).")
+@click.option("--threads-per-job", type=click.IntRange(min=1), default=1, show_default=True,
+              help="Kernel threads of each variant's run.")
+@click.option("--force", is_flag=True, help="Re-run variants that are up to date.")
+@click.option("--cold", is_flag=True, help="Time each run as it comes, numba's first-call kernel loading included.")
+@click.option("--quiet", is_flag=True, help="No progress lines; the table is still printed.")
+def study(case, varies, metric, reference, overrides, out, jobs, threads_per_job, force, cold, quiet):
+    """Run CASE once per variant and report metric, error and wall time (CSV, Markdown, PNG)."""
+    from demcli.study import run_study
+
+    result = run_study(case, varies, metric, out=out, jobs=jobs, threads_per_job=threads_per_job,
+                       reference=reference, overrides=overrides, force=force, cold=cold,
+                       log=None if quiet else (lambda line: click.echo(line, err=True)))
+    click.echo(result.markdown, nl=False)
+    if not quiet:
+        for path in result.files:
+            click.echo(str(path), err=True)
+    if result.failed:
+        click.echo(f"{len(result.failed)} variant(s) failed; see the status column", err=True)
+
+
+@cli.command()
 def warmup():
     """Compile (and cache) the engine kernels by running a tiny scene."""
     from demcli.check import warmup as _warmup

@@ -1,4 +1,4 @@
-"""Every shipped case validates; every smoke case runs end to end with its invariants."""
+"""Every shipped case (studies included) validates; every smoke case runs end to end with its invariants."""
 
 from pathlib import Path
 
@@ -14,9 +14,10 @@ CASES = Path(__file__).resolve().parent.parent / "cases"
 
 FULL = sorted(CASES.glob("*.yaml"))
 SMOKE = sorted((CASES / "smoke").glob("*.yaml"))
+STUDIES = sorted((CASES / "studies").glob("*.yaml"))
 
 
-@pytest.mark.parametrize("case", FULL + SMOKE, ids=lambda p: p.name)
+@pytest.mark.parametrize("case", FULL + SMOKE + STUDIES, ids=lambda p: p.name)
 def test_case_validates_and_plans(case):
     result = CliRunner().invoke(cli, ["check", str(case)])
     assert result.exit_code == 0, result.output
