@@ -566,8 +566,10 @@ def _wall_control(time, dt, wstart_n, wwall, wfc, wnormal, wv, wctrl, wprm, wfor
 
 
 @njit
-def _check(x, v, w, L, mass, inert, clumps, pi, pj, act, xs, rad, overlap_limit, ke_limit, info):
-    """Guards: NaN/Inf in body state, overlap ratio, runaway kinetic energy."""
+def _check(x, v, w, L, mass, inert, clumps, pi, pj, act, xs, rad, overlap_limit, ke_limit, info,
+           wsph, wwall, wkind, wpoint, wnormal, wradius):
+    """Guards: NaN/Inf in body state, overlap ratio (sphere pairs: overlap / smaller radius;
+    sphere-wall: overlap / radius, info[1] = -1), runaway kinetic energy."""
     ke = 0.0
     for b in range(x.shape[0]):
         s = 0.0
@@ -592,11 +594,25 @@ def _check(x, v, w, L, mass, inert, clumps, pi, pj, act, xs, rad, overlap_limit,
             if ratio > worst:
                 worst = ratio
                 wc = c
+    wi = -1
+    for k in range(wsph.shape[0]):
+        i = wsph[k]
+        wl = wwall[k]
+        sd, _, _, _ = wall_distance(wkind[wl], wpoint[wl, 0], wpoint[wl, 1], wpoint[wl, 2], wnormal[wl, 0],
+                                    wnormal[wl, 1], wnormal[wl, 2], wradius[wl], xs[i, 0], xs[i, 1], xs[i, 2])
+        ratio = (rad[i] - sd) / rad[i]
+        if ratio > worst:
+            worst = ratio
+            wi = i
     info[2] = worst
     info[3] = ke
     if worst > overlap_limit:
-        info[0] = pi[wc]
-        info[1] = pj[wc]
+        if wi >= 0:
+            info[0] = wi
+            info[1] = -1
+        else:
+            info[0] = pi[wc]
+            info[1] = pj[wc]
         return BAD_OVERLAP
     if ke > ke_limit:
         return BAD_ENERGY
@@ -734,7 +750,8 @@ def run_steps(nsteps, time, dt, law, flags, prm, gravity, local, visc,
             counters[C_WALLCTRL] += 1
         gstep = step0 + n
         if check_every > 0 and (gstep % check_every == 0 or gstep == 1):
-            status = _check(x, v, w, L, mass, inert, clumps, pi, pj, act, xs, rad, overlap_limit, ke_limit, info)
+            status = _check(x, v, w, L, mass, inert, clumps, pi, pj, act, xs, rad, overlap_limit, ke_limit, info,
+                            wsph, wwall, wkind, wpoint, wnormal, wradius)
             counters[C_CHECK] += 1
             if status != OK:
                 break

@@ -265,10 +265,6 @@ def _cyclic(ctx, cfg, state_in, actor, measure, columns, stop=None, finish_extra
     return dem.integrate(ctx, Node(dcfg), state_in, hooks)
 
 
-def _actor_z(system, b):
-    return float(system.x[b, 2])
-
-
 def _actor_bottom(groups, b):
     """Lowest point of actor b [m]."""
     sh = groups["polyhedron_shapes"]

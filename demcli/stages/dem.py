@@ -594,12 +594,15 @@ def _diagnosis(ctx, system, status, dt, dt_crit, cfg):
         other = "a wall" if int(info[1]) < 0 else f"body {int(system.body_id[int(info[1])])}"
         where += (f": body {int(system.body_id[int(info[0])])} and {other} overlap to a depth of "
                   f"{100 * info[2]:.3g} % of the bounding radius (limit {100 * cfg.safety.overlap_limit:.3g} %)")
+    elif status == K.BAD_OVERLAP and int(info[1]) < 0:
+        where += (f": sphere {int(info[0])} overlaps a wall by {100 * info[2]:.3g} % of its radius "
+                  f"(limit {100 * cfg.safety.overlap_limit:.3g} %)")
     elif status == K.BAD_OVERLAP:
         where += (f": spheres {int(info[0])} and {int(info[1])} overlap {100 * info[2]:.3g} % of the smaller radius "
                   f"(limit {100 * cfg.safety.overlap_limit:.3g} %)")
     elif status == K.BAD_ENERGY:
         where += (f": kinetic energy {info[3]:.4g} J exceeds {cfg.safety.energy_limit:g} x the reference energy "
-                  f"({system.ke_limit:.4g} J)")
+                  f"({system.ke_limit / cfg.safety.energy_limit:.4g} J)")
     where += f"; time step {dt:.4g} s is {dt / dt_crit:.3g} of the critical {dt_crit:.4g} s"
     return where
 
