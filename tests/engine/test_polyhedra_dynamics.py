@@ -49,13 +49,13 @@ def planes(points, normals):
 
 
 def system(polys, x=None, q=None, v=None, omega=None, effects=(), walls=None, gravity=(0.0, 0.0, -G),
-           young=1e9, friction=0.5, restitution=0.5, dt_factor=0.1, **kw):
-    """PolySystem of ConvexPolyhedron bodies with dt = dt_factor x the critical step."""
-    groups = polyhedra_groups(polys, RHO, x=x, q=q, v=v, omega=omega)
+           young=1e9, density=RHO, friction=0.5, restitution=0.5, dt_factor=0.1, **kw):
+    """PolySystem of ConvexPolyhedron bodies (one material) with dt = dt_factor x the critical step."""
+    groups = polyhedra_groups(polys, density, x=x, q=q, v=v, omega=omega)
     walls = Walls() if walls is None else walls
     plan = make_plan(list(effects), walls=len(walls) > 0)
     dyn_keys = {k: kw.pop(k) for k in list(kw) if k in Dynamics.__dataclass_fields__}
-    mats = [Material("rock", RHO, young=young, friction=friction, restitution=restitution)]
+    mats = [Material("rock", density, young=young, friction=friction, restitution=restitution)]
     s = PolySystem(groups, mats, ContactModel(), plan, walls, Dynamics(gravity=gravity, **dyn_keys), dt=1.0, **kw)
     s.dt = dt_factor * s.critical_dt()
     return s

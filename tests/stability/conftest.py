@@ -71,19 +71,16 @@ def quat(rotvec):
     return [w, x, y, z]
 
 
-def polyhedra(polys, x=None, q=None, v=None, omega=None, effects=(), walls=None, gravity=(0.0, 0.0, -G),
-              young=1e9, density=2600.0, friction=0.5, restitution=0.5, dt_factor=0.1, **kw):
-    """PolySystem of ConvexPolyhedron bodies (one material) with dt = dt_factor x critical."""
-    from demcli.engine.poly_system import PolySystem, polyhedra_groups
+def polyhedra(*args, **kw):
+    """PolySystem of ConvexPolyhedron bodies (one material) with dt = dt_factor x critical: the
+    builder of tests/engine/test_polyhedra_dynamics.py (same keywords, ``density`` included)."""
+    import sys
+    from pathlib import Path
 
-    groups = polyhedra_groups(polys, density, x=x, q=q, v=v, omega=omega)
-    walls = Walls() if walls is None else walls
-    plan = make_plan(list(effects), walls=len(walls) > 0)
-    dyn = {k: kw.pop(k) for k in list(kw) if k in Dynamics.__dataclass_fields__}
-    mats = [Material("rock", density, young=young, friction=friction, restitution=restitution)]
-    s = PolySystem(groups, mats, ContactModel(), plan, walls, Dynamics(gravity=gravity, **dyn), dt=1.0, **kw)
-    s.dt = dt_factor * s.critical_dt()
-    return s
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "engine"))
+    from test_polyhedra_dynamics import system
+
+    return system(*args, **kw)
 
 
 def mechanical_energy(s):
