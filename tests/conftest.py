@@ -11,3 +11,38 @@ CASES = ROOT / "cases"
 @pytest.fixture
 def smoke_case():
     return CASES / "smoke" / "beads.yaml"
+
+
+def _h5_datasets(path):
+    import h5py
+
+    out = {}
+    with h5py.File(path, "r") as f:
+        f.visititems(lambda name, obj: out.__setitem__(name, obj[()]) if isinstance(obj, h5py.Dataset) else None)
+    return out
+
+
+def _h5_differences(a, b):
+    """Names of the datasets that differ between HDF5 files a and b (NaN equals NaN), and of
+    those only one of them holds."""
+    import numpy as np
+
+    da, db = _h5_datasets(a), _h5_datasets(b)
+    out = sorted(set(da) ^ set(db))
+    for k in sorted(set(da) & set(db)):
+        u, v = np.asarray(da[k]), np.asarray(db[k])
+        if not np.array_equal(u, v, equal_nan=u.dtype.kind == "f"):
+            out.append(k)
+    return out
+
+
+@pytest.fixture
+def h5_differences():
+    """``h5_differences(a, b)``: the datasets of two state files that are not bit-identical."""
+    return _h5_differences
+
+
+@pytest.fixture
+def h5_datasets():
+    """``h5_datasets(path)``: every dataset of a state file as {name: array}."""
+    return _h5_datasets

@@ -12,21 +12,6 @@ from demcli import run_case
 from demcli.errors import StageError
 
 
-def _datasets(path):
-    """Every dataset of an HDF5 file as {name: array} (provenance attributes excluded)."""
-    out = {}
-    with h5py.File(path, "r") as f:
-        f.visititems(lambda name, obj: out.__setitem__(name, obj[()]) if isinstance(obj, h5py.Dataset) else None)
-    return out
-
-
-def _assert_identical(a, b):
-    da, db = _datasets(a), _datasets(b)
-    assert sorted(da) == sorted(db)
-    for k in da:
-        assert np.array_equal(np.asarray(da[k]), np.asarray(db[k])), k
-
-
 def test_run_writes_states_snapshots_records(smoke_case, tmp_path):
     # Given the smoke case
     # When run
@@ -57,24 +42,24 @@ def test_unchanged_stages_are_skipped_and_edits_rerun(smoke_case, tmp_path):
                                                  overrides=["stages.settle.time.steps=2000"]))
 
 
-def test_same_case_and_seed_bit_identical_for_1_and_2_threads(smoke_case, tmp_path):
+def test_same_case_and_seed_bit_identical_for_1_and_2_threads(smoke_case, tmp_path, h5_differences):
     # Given the same case run with 1 thread and with 2 threads
     run_case(smoke_case, out=tmp_path / "a", quiet=True, threads=1)
     run_case(smoke_case, out=tmp_path / "b", quiet=True, threads=2)
     # Then every dataset of every state is bit-identical
     for name in ("00-pour.h5", "01-settle.h5"):
-        _assert_identical(tmp_path / "a" / name, tmp_path / "b" / name)
+        assert h5_differences(tmp_path / "a" / name, tmp_path / "b" / name) == []
 
 
-def test_other_seed_differs(smoke_case, tmp_path):
+def test_other_seed_differs(smoke_case, tmp_path, h5_datasets):
     run_case(smoke_case, out=tmp_path / "a", quiet=True, only=None)
     run_case(smoke_case, out=tmp_path / "b", quiet=True, overrides=["seed=8"])
-    xa = _datasets(tmp_path / "a" / "00-pour.h5")["bodies/x"]
-    xb = _datasets(tmp_path / "b" / "00-pour.h5")["bodies/x"]
+    xa = h5_datasets(tmp_path / "a" / "00-pour.h5")["bodies/x"]
+    xb = h5_datasets(tmp_path / "b" / "00-pour.h5")["bodies/x"]
     assert not np.array_equal(xa, xb)
 
 
-def test_interrupted_and_resumed_equals_uninterrupted(smoke_case, tmp_path, monkeypatch):
+def test_interrupted_and_resumed_equals_uninterrupted(smoke_case, tmp_path, monkeypatch, h5_differences):
     # Given an uninterrupted reference run
     run_case(smoke_case, out=tmp_path / "ref", quiet=True)
     # When a run is interrupted (Ctrl-C) in the middle of the dem stage
@@ -100,7 +85,7 @@ def test_interrupted_and_resumed_equals_uninterrupted(smoke_case, tmp_path, monk
     # Then the first stage is skipped, the checkpoint is gone, and the result is bit-identical
     assert [r.skipped for r in res] == [True, False]
     assert not (tmp_path / "run" / "01-settle.ckpt.h5").exists()
-    _assert_identical(tmp_path / "ref" / "01-settle.h5", tmp_path / "run" / "01-settle.h5")
+    assert h5_differences(tmp_path / "ref" / "01-settle.h5", tmp_path / "run" / "01-settle.h5") == []
 
 
 def _poison(path, fn):
@@ -112,7 +97,7 @@ def _poison(path, fn):
     (lambda f: f["bodies/v"].__setitem__((3, 0), np.nan), "NaN or Inf"),
     (lambda f: f["bodies/x"].__setitem__(1, f["bodies/x"][0] + [1.0e-4, 0, 0]), "overlap beyond the limit"),
 ])
-def test_guards_stop_with_diagnosis_and_keep_last_good_state(smoke_case, tmp_path, poison, message):
+def test_guards_stop_with_diagnosis_and_keep_last_good_state(smoke_case, tmp_path, poison, message, h5_datasets):
     # Given a first-stage state with an injected defect
     run_case(smoke_case, out=tmp_path, quiet=True, only=None, overrides=["stages.settle.time.steps=10"])
     _poison(tmp_path / "00-pour.h5", poison)
@@ -122,7 +107,7 @@ def test_guards_stop_with_diagnosis_and_keep_last_good_state(smoke_case, tmp_pat
     # Then it stops with a diagnosis naming the guard and the time step, and keeps the last good state
     text = str(err.value)
     assert message in text and "critical" in text and "01-settle.lastgood.h5" in text
-    good = _datasets(tmp_path / "01-settle.lastgood.h5")
+    good = h5_datasets(tmp_path / "01-settle.lastgood.h5")
     assert np.isfinite(good["bodies/x"]).all() if "NaN" not in message else True
 
 

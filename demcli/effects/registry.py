@@ -72,3 +72,8 @@ register(EffectSpec(
 register(EffectSpec(
     "contact_damping", "polyhedra: normal dashpot c_n = 2 zeta sqrt(m* k_n sqrt(A)) from the material restitution",
     passes=("pairs:contact_damping",)))
+register(EffectSpec(
+    "bonds", "contact, parallel and Burgers bonds between spheres (declared by a stage that creates them, "
+    "derived from a state that holds them)",
+    fields=(("bond_list", "bond"), ("bond_history", "bond"), ("bond_force", "bond"), ("torque_i", "pair")),
+    passes=("bonds:forces", "bonds:gather", "kick:rotation"), counters=("bonds",)))

@@ -88,8 +88,9 @@ def critical_time_step(model, prm, materials, body_mass, sphere_radius, sphere_b
     """Critical step [s] of the explicit integrator for this scene and contact law.
 
     linear: 2 / omega_max, with omega^2 = k_n / m* for the lightest wall contact (m* = m;
-    a sphere pair, m* = m/2, gives 2 k_n / m) and omega^2 = 5 k_t / m for the rotational
-    mode of a sphere pair; hertz_mindlin: the Rayleigh wave step
+    a sphere pair, m* = m/2, gives 2 k_n / m) and omega^2 = k_t (1/m_i + 1/m_j + r_i^2/I_i
+    + r_j^2/I_j) = 7 k_t / m for the mode of a pair that the tangential spring moves and
+    turns (I = 2/5 m r^2); hertz_mindlin: the Rayleigh wave step
     pi r sqrt(rho / G) / (0.1631 nu + 0.8766) of the smallest sphere of each material
     (Li, Xu & Thornton 2005).
     """
@@ -99,7 +100,7 @@ def critical_time_step(model, prm, materials, body_mass, sphere_radius, sphere_b
         kn = prm[..., P_KN].max()
         kt = prm[..., P_KT].max()
         mmin = body_mass[sphere_body].min()
-        w2 = max(2 * kn / mmin, 5 * kt / mmin)
+        w2 = max(2 * kn / mmin, 7 * kt / mmin)
         return 2.0 / math.sqrt(w2) if w2 > 0 else math.inf
     best = math.inf
     for k in np.unique(sphere_material):

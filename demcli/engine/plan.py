@@ -37,7 +37,7 @@ class Plan:
         return "\n".join(lines)
 
 
-def make_plan(declared, clumps=False, walls=False, polyhedra=False):
+def make_plan(declared, clumps=False, walls=False, polyhedra=False, bonds=False):
     """Plan for the declared effect names plus what the state implies.
 
     Args:
@@ -45,6 +45,7 @@ def make_plan(declared, clumps=False, walls=False, polyhedra=False):
         clumps: the state holds bodies made of several spheres.
         walls: the stage has walls.
         polyhedra: the state's bodies are convex polyhedra.
+        bonds: the state holds bonds.
     """
     active = set(declared)
     unknown = active - set(EFFECTS)
@@ -56,6 +57,8 @@ def make_plan(declared, clumps=False, walls=False, polyhedra=False):
         active.add("clumps")
     if walls:
         active.add("walls")
+    if bonds:
+        active.add("bonds")
     passes = list(BASE_PASSES)
     fields = list(BASE_FIELDS)
     for name in sorted(active):
@@ -72,4 +75,5 @@ def make_plan(declared, clumps=False, walls=False, polyhedra=False):
     flags[K.F_LOCAL] = "local_damping" in active
     flags[K.F_VISCOUS] = "viscous_damping" in active
     flags[K.F_WALLS] = "walls" in active
+    flags[K.F_BONDS] = "bonds" in active
     return Plan(frozenset(active), tuple(flags), tuple(passes), tuple(fields))

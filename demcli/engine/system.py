@@ -137,9 +137,13 @@ class System(BodySystem):
         dynamics: :class:`Dynamics`.
         dt: time step [s].
         time, step: clock of the input state.
+        mass_scale: mass scaling for quasi-static runs (as for polyhedra): masses and
+            inertias x factor inside the engine, gravity / factor, ``groups()`` unscaled.
     """
 
-    def __init__(self, groups, materials, model, plan, walls, dynamics, dt, time=0.0, step=0):
+    def __init__(self, groups, materials, model, plan, walls, dynamics, dt, time=0.0, step=0, mass_scale=1.0):
+        from demcli.engine.bonds import BondSet
+
         self.plan = plan
         self.materials = list(materials)
         self.model = model
@@ -158,8 +162,9 @@ class System(BodySystem):
         self.v = np.ascontiguousarray(b["v"], np.float64).copy()
         self.w = np.ascontiguousarray(b["omega"], np.float64).copy()
         self.q = np.ascontiguousarray(b["q"], np.float64).copy()
-        self.mass = np.ascontiguousarray(b["mass"], np.float64)
-        self.inert = np.ascontiguousarray(b["inertia"], np.float64)
+        self.mass_scale = float(mass_scale)
+        self.mass = np.ascontiguousarray(b["mass"], np.float64) * self.mass_scale
+        self.inert = np.ascontiguousarray(b["inertia"], np.float64) * self.mass_scale
         self.bflags = np.ascontiguousarray(b["flags"], np.int8)
         nb = len(self.mass)
         self.f = np.ascontiguousarray(b.get("force", np.zeros((nb, 3))), np.float64).copy()
@@ -167,11 +172,11 @@ class System(BodySystem):
         self.clumps = self.flags[K.F_CLUMPS]
         self.sbody = np.ascontiguousarray(s["body"], np.int64)
         self.soff = np.ascontiguousarray(s["offset"], np.float64)
-        self.rad = np.ascontiguousarray(s["radius"], np.float64)
+        self.rad = np.ascontiguousarray(s["radius"], np.float64).copy()
         self.smat = np.ascontiguousarray(s["material"], np.int64)
         ns = len(self.rad)
         if self.clumps:
-            self.L = np.ascontiguousarray(b["angmom"], np.float64).copy() if "angmom" in b \
+            self.L = np.ascontiguousarray(b["angmom"], np.float64) * self.mass_scale if "angmom" in b \
                 else self._angmom_from_omega()
             self.xs = np.zeros((ns, 3))
             self.vs = np.zeros((ns, 3))
@@ -208,8 +213,39 @@ class System(BodySystem):
         self.max_cells = max(64, 8 * ns)
         self._fresh_lists = True
         self.prime = True  # evaluate F(x_0) before the first step; False when resuming from stored loads
-        self.gravity = np.asarray(dynamics.gravity, np.float64)
+        self.gravity = np.asarray(dynamics.gravity, np.float64) / self.mass_scale
         self.ke_limit = math.inf
+        self.bonds = BondSet.from_groups(groups, ns) if plan.has("bonds") else BondSet.empty(ns)
+        self._bond_arrays = self.bonds.kernel_arrays()
+
+    # ---- bonds ------------------------------------------------------------------------
+    def bond_touching(self, gap):
+        """Bond every touching pair whose material pair has a bond model (surfaces closer
+        than ``gap`` [m]); returns the number of new bonds. The pair list is rebuilt."""
+        if not self.plan.has("bonds"):
+            raise ValueError("bonds are not an effect of this stage")
+        from demcli.kernels.bonds import B_KIND, PARALLEL_BOND
+
+        n = self.bonds.bond_touching(self.xs, self.rad, self.smat, self.sbody, gap)
+        self._bond_arrays = self.bonds.kernel_arrays()
+        self._fresh_lists = True
+        # contacts a bond now replaces are no longer contacts (the rebuilt list leaves them out)
+        bd = self.bonds
+        replaces = bd.prm[bd.model, B_KIND] != PARALLEL_BOND
+        bonded = set(zip(bd.i[replaces].tolist(), bd.j[replaces].tolist()))
+        nl = self.nl
+        for c in np.nonzero(nl[K.NL_ACT])[0]:
+            if (int(nl[K.NL_PI][c]), int(nl[K.NL_PJ][c])) in bonded:
+                nl[K.NL_ACT][c] = 0
+        return n
+
+    @property
+    def bond_state(self):
+        return self.bonds.state
+
+    @property
+    def bond_hist(self):
+        return self.bonds.hist
 
     # ---- set-up helpers -------------------------------------------------------------
     def _place_members(self):
@@ -227,8 +263,8 @@ class System(BodySystem):
         start, ci, cj, ft, mr = self._stored_history(groups.get("contacts", {}), "i", "j", ns)
         wstart, ws_, ww, wft, wmr = self._stored_history(groups.get("wall_contacts", {}), "sphere", "wall", ns)
         return (start, ci, cj, np.zeros(ns + 1, np.int64), _EMPTY_I,
-                ft, mr, _empty2(3), _empty2(3), np.zeros(len(ci), np.uint8), _empty2(2),
-                wstart, ws_, ww, wft, wmr, np.zeros((len(ww), 4)),
+                ft, mr, np.zeros((len(ci), 3)), _empty2(3), np.zeros(len(ci), np.uint8), _empty2(2),
+                wstart, ws_, ww, wft, wmr, np.zeros((len(ww), 5)),
                 self.xs.copy(), np.zeros((len(self.walls), 3)))
 
     def _stored_history(self, group, key_a, key_b, ns):
@@ -251,14 +287,23 @@ class System(BodySystem):
 
     # ---- time stepping --------------------------------------------------------------
     def critical_dt(self):
-        """Critical time step of this scene [s] (see :func:`critical_time_step`)."""
-        return critical_time_step(self.model, self.prm, self.materials, self.mass, self.rad, self.sbody, self.smat)
+        """Critical time step of this scene [s]: :func:`critical_time_step` of the contacts,
+        lowered by the bonds (their omega^2 added to the contacts', a bond and a contact
+        acting side by side; :meth:`BondSet.critical_omega2`)."""
+        dt = critical_time_step(self.model, self.prm, self.materials, self.mass, self.rad, self.sbody, self.smat)
+        if self.model.law != "linear":  # the Rayleigh step follows the density, scaled with the masses
+            dt *= math.sqrt(self.mass_scale)
+        if not len(self.bonds.prm) or not len(self.rad):
+            return dt
+        w2 = self.bonds.critical_omega2(float(self.smass.min()), float(self.inert.min()), float(self.rad.min()))
+        return 2.0 / math.sqrt((2.0 / dt) ** 2 + w2) if w2 > 0 else dt
 
     def advance(self, nsteps):
         """Run ``nsteps`` steps in compiled code; returns (status, steps done)."""
         from demcli.kernels.step import run_steps
 
         w = self.walls
+        intact = self.bonds.state == 0
         status, done, self.time, self.nl = run_steps(
             int(nsteps), self.time, self.dt, self.law, self.flags, self.prm, self.gravity,
             float(self.dyn.local_damping), float(self.dyn.viscous_damping),
@@ -268,27 +313,82 @@ class System(BodySystem):
             w.kind, self.wpoint, w.normal, w.radius, self.wv, w.material, w.control, w.prm,
             self.wforce, self.wkn,
             self.nl, self.skin, self.max_cells,
-            self.esph, self.ebody, self.eacc,
+            self.esph, self.ebody, self.eacc, self._bond_arrays, self.bonds.prm,
             int(self.dyn.check_every), float(self.dyn.overlap_limit), float(self.ke_limit),
             self.counters, self.info, self._fresh_lists, self.step, self.prime)
         self._fresh_lists = False
         self.prime = False
         self.step += int(done)
+        if len(self.bonds) and not np.array_equal(intact, self.bonds.state == 0):
+            self._fresh_lists = True  # a bond broke: its pair joins the contact list at the next step
         return int(status), int(done)
 
     # ---- measures -------------------------------------------------------------------
     _MUTABLE = ("x", "v", "w", "q", "L", "f", "tq", "xs", "vs", "ws", "fs", "ts", "wpoint", "wv", "wforce", "esph",
-                "ebody", "eacc", "nl", "time", "step")
+                "ebody", "eacc", "nl", "time", "step", "bond_state", "bond_hist", "wall_radius", "wall_params")
+
+    @property
+    def wall_radius(self):
+        """Cylinder radii (a pressure-loaded membrane changes its own)."""
+        return self.walls.radius
+
+    @property
+    def wall_params(self):
+        """Wall control rows (a pressure-loaded membrane keeps its radial rate there)."""
+        return self.walls.prm
 
     def strain_energy(self):
+        """Elastic energy in contacts and bonds [J]."""
+        from demcli.kernels.bonds import bond_strain_energy
         from demcli.kernels.step import total_strain_energy
 
         nl = self.nl
         w = self.walls
-        return float(total_strain_energy(
+        bd = self.bonds
+        eb = float(bond_strain_energy(bd.start, bd.j, bd.model, bd.state, bd.hist, bd.prm, self.xs, self.rad)) \
+            if len(bd) else 0.0
+        return eb + float(total_strain_energy(
             nl[K.NL_PI], nl[K.NL_PJ], self.xs, self.rad, self.smat, self.prm, self.law, nl[K.NL_FT], nl[K.NL_MR],
             self.flags[K.F_FRICTION], self.flags[K.F_ROLLING], nl[K.NL_WSTART], nl[K.NL_WWALL], w.kind, self.wpoint,
             w.normal, w.radius, w.material, nl[K.NL_WFT], nl[K.NL_WMR]))
+
+    def stress(self, volume):
+        """Mean stress in the particles [Pa], (3, 3), compression positive: the contact and
+        bond virial over ``volume`` [m^3] (:func:`demcli.kernels.measures.contact_virial`)."""
+        from demcli.kernels.measures import contact_virial
+
+        nl = self.nl
+        w = self.walls
+        ba = self._bond_arrays
+        return contact_virial(nl[K.NL_PI], nl[K.NL_PJ], nl[K.NL_ACT], nl[K.NL_FC], self.xs, nl[K.NL_WSTART],
+                              nl[K.NL_WWALL], nl[K.NL_WFC], w.kind, self.wpoint, w.normal, w.radius,
+                              ba[0], ba[1], ba[7]) / volume
+
+    def contacts_per_sphere(self):
+        """(n_s,) touching sphere-sphere contacts and intact bonds of each sphere."""
+        nl = self.nl
+        act = nl[K.NL_ACT].astype(bool)
+        n = len(self.rad)
+        z = np.bincount(nl[K.NL_PI][act], minlength=n) + np.bincount(nl[K.NL_PJ][act], minlength=n)
+        bd = self.bonds
+        if len(bd):
+            from demcli.kernels.bonds import INTACT
+
+            ok = bd.state == INTACT
+            z = z + np.bincount(bd.i[ok], minlength=n) + np.bincount(bd.j[ok], minlength=n)
+        return z
+
+    def scale_radii(self, factor):
+        """Spheres-only scenes: radii x factor (scalar or per sphere), masses x factor^3 and
+        inertias x factor^5 (same density); the lists are rebuilt at the next step."""
+        if self.clumps:
+            raise ValueError("radius scaling is for spheres-only scenes")
+        f = np.broadcast_to(np.asarray(factor, np.float64), self.rad.shape)
+        self.rad *= f
+        self.mass *= f ** 3
+        self.inert *= (f ** 5)[:, None]
+        self.smass[:] = self.mass
+        self._fresh_lists = True
 
     def contact_count(self):
         """(sphere-sphere contacts, sphere-wall contacts) touching now."""
@@ -316,10 +416,11 @@ class System(BodySystem):
         if self.flags[K.F_ROLLING]:
             wall_contacts["mr"] = nl[K.NL_WMR][wact].copy()
         bodies = {"x": self.x.copy(), "v": self.v.copy(), "q": self.q.copy(), "omega": self.w.copy(),
-                  "mass": self.mass.copy(), "inertia": self.inert.copy(), "id": self.body_id.copy(),
-                  "flags": self.bflags.copy(), "force": self.f.copy(), "torque": self.tq.copy()}
+                  "mass": self.mass / self.mass_scale, "inertia": self.inert / self.mass_scale,
+                  "id": self.body_id.copy(), "flags": self.bflags.copy(), "force": self.f.copy(),
+                  "torque": self.tq.copy()}
         if self.clumps:
-            bodies["angmom"] = self.L.copy()
+            bodies["angmom"] = self.L / self.mass_scale
         spheres = {"body": self.sbody.copy(), "offset": self.soff.copy(), "radius": self.rad.copy(),
                    "material": self.smat.copy()}
         w = self.walls
@@ -329,5 +430,8 @@ class System(BodySystem):
                  "force": self.wforce.copy(),
                  "extent": w.extent + np.tile(self.wpoint - self.wpoint0, 2)}
         energy = {k: np.float64(v) for k, v in self.losses().items()}
-        return {"bodies": bodies, "spheres": spheres, "contacts": contacts, "wall_contacts": wall_contacts,
-                "walls": walls, "energy": energy}
+        out = {"bodies": bodies, "spheres": spheres, "contacts": contacts, "wall_contacts": wall_contacts,
+               "walls": walls, "energy": energy}
+        if self.plan.has("bonds"):
+            out.update(self.bonds.groups())
+        return out

@@ -70,6 +70,19 @@ def _to_tangent_plane(hx, hy, hz, nx, ny, nz):
 
 
 @njit(inline="always")
+def pair_kinematics(vs, ws, i, j, nx, ny, nz, ai, aj):
+    """Velocity of i's contact point relative to j's, v_i + w_i x (-a_i n) - v_j - w_j x (a_j n)
+    [m/s], and the relative angular velocity w_i - w_j [rad/s]; the contact point lies a_i from
+    i's centre and a_j from j's along n (from j to i)."""
+    wix, wiy, wiz = ws[i, 0], ws[i, 1], ws[i, 2]
+    wjx, wjy, wjz = ws[j, 0], ws[j, 1], ws[j, 2]
+    vx = vs[i, 0] - vs[j, 0] - ai * (wiy * nz - wiz * ny) - aj * (wjy * nz - wjz * ny)
+    vy = vs[i, 1] - vs[j, 1] - ai * (wiz * nx - wix * nz) - aj * (wjz * nx - wjx * nz)
+    vz = vs[i, 2] - vs[j, 2] - ai * (wix * ny - wiy * nx) - aj * (wjx * ny - wjy * nx)
+    return vx, vy, vz, wix - wjx, wiy - wjy, wiz - wjz
+
+
+@njit(inline="always")
 def contact_law(law, prm, delta, nx, ny, nz, vx, vy, vz, wx, wy, wz, rstar, mstar, dt,
                 ft, mr, k, friction, rolling):
     """Force and rolling moment on i for one contact.

@@ -1,14 +1,14 @@
 """Constants shared by the step kernel and the Python plan (importing this loads no numba)."""
 
 # kernel switches: index into the flags tuple (all bool)
-F_CLUMPS, F_FRICTION, F_ROLLING, F_ENERGY, F_PLANAR, F_GRAVITY, F_LOCAL, F_VISCOUS, F_WALLS = range(9)
-N_FLAGS = 9
+F_CLUMPS, F_FRICTION, F_ROLLING, F_ENERGY, F_PLANAR, F_GRAVITY, F_LOCAL, F_VISCOUS, F_WALLS, F_BONDS = range(10)
+N_FLAGS = 10
 
 # pass counters: one increment per executed pass per step
 COUNTERS = ("kick", "members", "wallmove", "rebuild", "pairs", "gather", "body", "wallctrl", "check",
-            "friction", "rolling", "energy", "gravity", "damping")
+            "friction", "rolling", "energy", "gravity", "damping", "bonds")
 (C_KICK, C_MEMBERS, C_WALLMOVE, C_REBUILD, C_PAIRS, C_GATHER, C_BODY, C_WALLCTRL, C_CHECK,
- C_FRICTION, C_ROLLING, C_ENERGY, C_GRAVITY, C_DAMPING) = range(len(COUNTERS))
+ C_FRICTION, C_ROLLING, C_ENERGY, C_GRAVITY, C_DAMPING, C_BONDS) = range(len(COUNTERS))
 N_COUNTERS = len(COUNTERS)
 
 # guard status codes

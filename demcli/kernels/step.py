@@ -29,14 +29,16 @@ from numba import prange
 
 from demcli.jit import njit
 from demcli.kernels import quat
-from demcli.kernels.contact import HERTZ, P_CN, P_ESTAR, P_KN, P_ZETA, contact_law, strain_energy
+from demcli.kernels.bonds import bond_gather, bond_pass, drop_bonded
+from demcli.kernels.contact import (HERTZ, P_CN, P_ESTAR, P_KN, P_ZETA, contact_law, pair_kinematics,
+                                   strain_energy)
 from demcli.kernels.neighbors import build_pairs, build_reverse, build_wall_pairs, carry_history
-from demcli.kernels.walls import (FORCE, SERVO, VELOCITY, W_AMPLITUDE, W_AREA, W_FREQ, W_GAIN,
-                                  W_MASS, W_TARGET, W_VMAX, wall_distance)
+from demcli.kernels.walls import (FORCE, PRESSURE, SERVO, VELOCITY, W_AMPLITUDE, W_AREA, W_FREQ,
+                                  W_GAIN, W_MASS, W_RATE, W_TARGET, W_VMAX, wall_distance)
 
-from demcli.kernels.layout import (C_BODY, C_CHECK, C_DAMPING, C_ENERGY, C_FRICTION, C_GATHER,
+from demcli.kernels.layout import (C_BODY, C_BONDS, C_CHECK, C_DAMPING, C_ENERGY, C_FRICTION, C_GATHER,
                                    C_GRAVITY, C_KICK, C_MEMBERS, C_PAIRS, C_REBUILD, C_ROLLING,
-                                   C_WALLCTRL, C_WALLMOVE, F_CLUMPS, F_ENERGY, F_FRICTION, F_GRAVITY,
+                                   C_WALLCTRL, C_WALLMOVE, F_BONDS, F_CLUMPS, F_ENERGY, F_FRICTION, F_GRAVITY,
                                    F_LOCAL, F_PLANAR, F_ROLLING, F_VISCOUS, FIX_ROTATION,
                                    FIX_TRANSLATION, OK, BAD_NUMBER, BAD_OVERLAP, BAD_ENERGY)
 
@@ -206,17 +208,12 @@ def _pair_forces(start, pj, xs, vs, ws, rad, smat, smass, prm, law, dt, ft, mr, 
             delta = rs - d
             ai = ri - 0.5 * delta
             aj = rj - 0.5 * delta
-            # contact-point velocities: v + w x (xc - x)
-            wix, wiy, wiz = ws[i, 0], ws[i, 1], ws[i, 2]
-            wjx, wjy, wjz = ws[j, 0], ws[j, 1], ws[j, 2]
-            vx = vs[i, 0] - vs[j, 0] - ai * (wiy * nz - wiz * ny) - aj * (wjy * nz - wjz * ny)
-            vy = vs[i, 1] - vs[j, 1] - ai * (wiz * nx - wix * nz) - aj * (wjz * nx - wjx * nz)
-            vz = vs[i, 2] - vs[j, 2] - ai * (wix * ny - wiy * nx) - aj * (wjx * ny - wjy * nx)
+            vx, vy, vz, wx, wy, wz = pair_kinematics(vs, ws, i, j, nx, ny, nz, ai, aj)
             mi = smass[i]
             mj = smass[j]
             fx, fy, fz, mx, my, mz, ed, ef = contact_law(
                 law, prm[smat[i], smat[j]], delta, nx, ny, nz, vx, vy, vz,
-                wix - wjx, wiy - wjy, wiz - wjz, ri * rj / rs, mi * mj / (mi + mj), dt,
+                wx, wy, wz, ri * rj / rs, mi * mj / (mi + mj), dt,
                 ft, mr, c, friction, rolling)
             fc[c, 0] = fx
             fc[c, 1] = fy
@@ -270,7 +267,7 @@ def _wall_contact(i, k, w, xs, vs, ws, rad, smat, smass, wkind, wpoint, wnormal,
             wmr[k, 0] = 0.0
             wmr[k, 1] = 0.0
             wmr[k, 2] = 0.0
-        return 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+        return 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
     a = s  # branch from the centre to the contact point on the wall surface
     wix, wiy, wiz = ws[i, 0], ws[i, 1], ws[i, 2]
     vx = vs[i, 0] - wv[w, 0] - a * (wiy * nz - wiz * ny)
@@ -294,7 +291,7 @@ def _wall_contact(i, k, w, xs, vs, ws, rad, smat, smass, wkind, wpoint, wnormal,
         cn = p[P_CN] + 2.0 * p[P_ZETA] * math.sqrt(m * kn)
     if dt > 0.0:
         kn += cn / dt
-    return fx, fy, fz, tx, ty, tz, ed, ef, kn
+    return fx, fy, fz, tx, ty, tz, ed, ef, kn, fx * nx + fy * ny + fz * nz
 
 
 @njit(inline="always")
@@ -354,7 +351,8 @@ def _gather(frow, trow, erow, rstart, rlist, fc, tj, act, epair, wstart, wwall, 
     friction = flags[F_FRICTION]
     rolling = flags[F_ROLLING]
     energy = flags[F_ENERGY]
-    torque = friction or rolling
+    pair_torque = friction or rolling
+    torque = pair_torque or flags[F_BONDS]  # bonds add theirs to trow
     h = 0.5 * dt
     for i in prange(xs.shape[0]):
         # i's side of its own row, summed by the pair pass in the same order
@@ -379,7 +377,7 @@ def _gather(frow, trow, erow, rstart, rlist, fc, tj, act, epair, wstart, wwall, 
                 fx -= fc[c, 0]
                 fy -= fc[c, 1]
                 fz -= fc[c, 2]
-                if torque:
+                if pair_torque:
                     tx += tj[c, 0]
                     ty += tj[c, 1]
                     tz += tj[c, 2]
@@ -387,13 +385,14 @@ def _gather(frow, trow, erow, rstart, rlist, fc, tj, act, epair, wstart, wwall, 
                     e0 += epair[c, 0]
                     e1 += epair[c, 1]
         for k in range(wstart[i], wstart[i + 1]):
-            wfx, wfy, wfz, wtx, wty, wtz, ed, ef, kn = _wall_contact(
+            wfx, wfy, wfz, wtx, wty, wtz, ed, ef, kn, wfn = _wall_contact(
                 i, k, wwall[k], xs, vs, ws, rad, smat, smass, wkind, wpoint, wnormal, wradius, wv,
                 wmat, prm, law, dt, wft, wmr, friction, rolling)
             wfc[k, 0] = wfx
             wfc[k, 1] = wfy
             wfc[k, 2] = wfz
             wfc[k, 3] = kn
+            wfc[k, 4] = wfn
             fx += wfx
             fy += wfy
             fz += wfz
@@ -511,6 +510,18 @@ def move_walls(wpoint, wref, wv, dt, lim2, rebuild):
 
 
 @njit
+def move_radii(wctrl, wprm, wradius, wref, dt, lim2, rebuild):
+    """Pressure-loaded cylinders change their radius by W_RATE dt; one whose radius moved
+    more than skin/2 since the last list build flags a rebuild (wref[w, 0] holds that change)."""
+    for k in range(wctrl.shape[0]):
+        if wctrl[k] == PRESSURE:
+            wradius[k] += wprm[k, W_RATE] * dt
+            wref[k, 0] += wprm[k, W_RATE] * dt
+            if wref[k, 0] ** 2 > lim2:
+                rebuild[0] = 1
+
+
+@njit
 def _mark_history(act, ft, mr, friction, rolling):
     """Flag carried pairs with history as active, so the pair pass clears it if they opened."""
     for c in range(act.shape[0]):
@@ -524,6 +535,7 @@ def _mark_history(act, ft, mr, friction, rolling):
 def _wall_control(time, dt, wstart_n, wwall, wfc, wnormal, wv, wctrl, wprm, wforce, wkn, eacc, energy):
     """Sum contact forces on each wall (fixed order), then set each wall's velocity."""
     nw = wv.shape[0]
+    fnsum = np.zeros(nw)  # normal force the particles press on each wall with (wfc column 4: spheres)
     for w in range(nw):
         wforce[w, 0] = 0.0
         wforce[w, 1] = 0.0
@@ -534,6 +546,8 @@ def _wall_control(time, dt, wstart_n, wwall, wfc, wnormal, wv, wctrl, wprm, wfor
         wforce[w, 0] -= wfc[k, 0]
         wforce[w, 1] -= wfc[k, 1]
         wforce[w, 2] -= wfc[k, 2]
+        if wfc.shape[1] > 4:
+            fnsum[w] += wfc[k, 4]
         if wfc[k, 3] > 0.0 and (wfc[k, 0] != 0.0 or wfc[k, 1] != 0.0 or wfc[k, 2] != 0.0):
             wkn[w] += wfc[k, 3]
     for w in range(nw):
@@ -542,7 +556,10 @@ def _wall_control(time, dt, wstart_n, wwall, wfc, wnormal, wv, wctrl, wprm, wfor
             # work done by the wall on the particles this step
             eacc[0] -= (wforce[w, 0] * wv[w, 0] + wforce[w, 1] * wv[w, 1] + wforce[w, 2] * wv[w, 2]) * dt
         mode = wctrl[w]
-        if mode == SERVO:
+        if mode == PRESSURE:
+            # a membrane of mass M: M dR'/dt = (normal force of the particles) - pressure x area
+            wprm[w, W_RATE] += dt * (fnsum[w] - wprm[w, W_TARGET] * wprm[w, W_AREA]) / wprm[w, W_MASS]
+        elif mode == SERVO:
             # compressive stress carried by the wall (particles push it along -n)
             sig = -(wforce[w, 0] * nx + wforce[w, 1] * ny + wforce[w, 2] * nz) / wprm[w, W_AREA]
             err = wprm[w, W_TARGET] - sig
@@ -625,7 +642,7 @@ def run_steps(nsteps, time, dt, law, flags, prm, gravity, local, visc,
               spheres, rad, smat, smass, sbody, soff, mstart, mlist,
               wkind, wpoint, wnormal, wradius, wv, wmat, wctrl, wprm, wforce, wkn,
               nl, skin, max_cells,
-              esph, ebody, eacc,
+              esph, ebody, eacc, bl, bprm,
               check_every, overlap_limit, ke_limit, counters, info, force_rebuild, step0, prime):
     """Advance ``nsteps`` steps; returns (status, steps_done, time, nl).
 
@@ -635,6 +652,8 @@ def run_steps(nsteps, time, dt, law, flags, prm, gravity, local, visc,
             spheres-only scenes.
         nl: neighbour state (start, pi, pj, rstart, rlist, ft, mr, fc, tj, act, epair,
             wstart, wsph, wwall, wft, wmr, wfc, xref, wref); rebuilt here when needed.
+        bl: bond state (bstart, bj, brstart, brlist, model, state, hist, bfc, btj, bed), see
+            :mod:`demcli.kernels.bonds`; bprm: (n_models, N_BPARAMS) bond-model table.
         esph: (n_s, 2) cumulative contact damping and friction losses [J];
         ebody: (n_b,) cumulative body damping losses [J]; eacc: (1,) wall work [J].
         counters: (N_COUNTERS,) int64 pass counters, incremented per executed pass.
@@ -650,11 +669,14 @@ def run_steps(nsteps, time, dt, law, flags, prm, gravity, local, visc,
     xs, vs, ws, fs, ts = spheres
     (start, pi, pj, rstart, rlist, ft, mr, fc, tj, act, epair,
      wstart, wsph, wwall, wft, wmr, wfc, xref, wref) = nl
+    bstart, bj, brstart, brlist, bmodel, bstate, bhist, bfc, btj, bed = bl
     clumps = flags[F_CLUMPS]
     friction = flags[F_FRICTION]
     rolling = flags[F_ROLLING]
     energy = flags[F_ENERGY]
-    rotate_bodies = friction or rolling or clumps
+    bonds = flags[F_BONDS]
+    rotate_bodies = friction or rolling or clumps or bonds
+    broke = np.zeros(1, np.int64)
     lim2 = (0.5 * skin) ** 2
     rebuild = np.zeros(1, np.int64)
     rebuild[0] = 1 if force_rebuild else 0
@@ -662,7 +684,7 @@ def run_steps(nsteps, time, dt, law, flags, prm, gravity, local, visc,
     ns = xs.shape[0]
     # per-sphere sums of each sphere's own pair row (race-free: the row owner writes them)
     frow = np.zeros((ns, 3))
-    trow = np.zeros((ns if friction or rolling else 0, 3))
+    trow = np.zeros((ns if friction or rolling or bonds else 0, 3))
     erow = np.zeros((ns if energy else 0, 2))
     status = OK
     n = 0
@@ -682,10 +704,13 @@ def run_steps(nsteps, time, dt, law, flags, prm, gravity, local, visc,
             counters[C_MEMBERS] += 1
         if nw > 0 and not prime:
             move_walls(wpoint, wref, wv, dt, lim2, rebuild)
+            move_radii(wctrl, wprm, wradius, wref, dt, lim2, rebuild)
             counters[C_WALLMOVE] += 1
         if rebuild[0]:
             rebuild[0] = 0
             nstart, npi, npj = build_pairs(xs, rad, sbody, skin, max_cells)
+            if bonds:
+                nstart, npi, npj = drop_bonded(nstart, npi, npj, bstart, bj, bmodel, bstate, bprm)
             npair = npi.shape[0]
             nft = np.zeros((npair if friction else 0, 3))
             nmr = np.zeros((npair if rolling else 0, 3))
@@ -706,7 +731,7 @@ def run_steps(nsteps, time, dt, law, flags, prm, gravity, local, visc,
                 carry_history(ns, nws, nww, wstart, wwall, wft, nwft)
                 carry_history(ns, nws, nww, wstart, wwall, wmr, nwmr)
                 wstart, wsph, wwall, wft, wmr = nws, nwsph, nww, nwft, nwmr
-                wfc = np.zeros((nq, 4))
+                wfc = np.zeros((nq, 5))
                 wref[:, :] = 0.0
             xref = xs.copy()
             counters[C_REBUILD] += 1
@@ -716,6 +741,16 @@ def run_steps(nsteps, time, dt, law, flags, prm, gravity, local, visc,
         _pair_forces(start, pj, xs, vs, ws, rad, smat, smass, prm, law, h, ft, mr, friction, rolling,
                      energy, fc, tj, act, epair, frow, trow, erow)
         counters[C_PAIRS] += 1
+        if bonds:
+            if not (friction or rolling):
+                trow[:, :] = 0.0
+            bond_pass(bstart, bj, bmodel, bstate, bhist, bprm, xs, vs, ws, rad, h, bfc, btj, bed,
+                      frow, trow, erow, energy, broke)
+            bond_gather(brstart, brlist, bfc, btj, bed, frow, trow, erow, energy)
+            if broke[0]:
+                broke[0] = 0
+                rebuild[0] = 1
+            counters[C_BONDS] += 1
         if friction:
             counters[C_FRICTION] += 1
         if rolling:

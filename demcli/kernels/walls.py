@@ -19,16 +19,18 @@ FIXED = 0
 VELOCITY = 1
 FORCE = 2
 SERVO = 3
+PRESSURE = 4       # cylinders: a membrane of mass W_MASS whose radius moves under the pressure W_TARGET
 
 # columns of wprm[w, :]
-W_TARGET = 0      # FORCE: applied force [N] along -normal; SERVO: target stress [Pa]
+W_TARGET = 0      # FORCE: applied force [N] along -normal; SERVO: target stress [Pa]; PRESSURE: [Pa]
 W_AMPLITUDE = 1   # FORCE: sinusoidal amplitude [N]
 W_FREQ = 2        # FORCE: frequency [Hz]
-W_MASS = 3        # FORCE: wall mass [kg]
+W_MASS = 3        # FORCE, PRESSURE: wall mass [kg]
 W_GAIN = 4        # SERVO: relaxation alpha in (0, 1]: gain G = alpha A / (sum (k_n + c_n/dt) dt), PFC-style
 W_VMAX = 5        # SERVO: speed limit [m/s]
-W_AREA = 6        # SERVO: loaded area [m^2]
-N_WPARAMS = 7
+W_AREA = 6        # SERVO, PRESSURE: loaded area [m^2]
+W_RATE = 7        # PRESSURE: rate of change of the radius [m/s]
+N_WPARAMS = 8
 
 
 @njit(inline="always")

@@ -36,9 +36,9 @@ Reads a cut specimen (``specimen`` and ``aggregates`` groups) and:
    its stiffnesses and strengths (a missing pair or strength is a config error, and
    :func:`phase_table` re-validates a stored table).
 
-The bond physics (contact and parallel bonds breaking at these strengths) is the bonds
-issue's engine work: this stage stores and validates the assignment; no stage of this
-version runs bonded contacts.
+This stage stores and validates the assignment; a ``dem`` stage after it with
+``bonds: {from_phases: true, create: true}`` bonds every touching pair by it and runs the
+bonds (docs/bonds.md).
 
 Output: bodies (aggregates, then one single-ball body per mastic ball), spheres,
 ``phases`` (phase of each sphere, the pair table), ``mastic`` (volumetrics),
@@ -402,7 +402,7 @@ def run(ctx, cfg, state_in):
             + (f" (target {100 * vv_target:g} %)" if np.isfinite(vv_target) else "")
             + (f"; {int(np.sum(overlap > 0))} overlap aggregate balls by up to {overlap.max() / r:.2f} r"
                if n and overlap.max() > 0 else "")
-            + "; contact models stored by phase pair (bond physics: not run in this version)")
+            + "; contact models stored by phase pair (a dem stage with bonds.from_phases runs them)")
     return state
 
 

@@ -50,5 +50,6 @@ def load_stage_types():
     from demcli.stages import discretize, polygons  # noqa: F401  (2D sections, seed 001)
     from demcli.stages import asphalt_carve, asphalt_compact, asphalt_place  # noqa: F401  (3D asphalt, seed 000)
     from demcli.stages import asphalt_cut, asphalt_mastic  # noqa: F401  (3D asphalt, seed 000)
+    from demcli.stages import sand_asphalt  # noqa: F401  (bonded viscoelastic specimens, seed 003)
 
     return STAGE_TYPES

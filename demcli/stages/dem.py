@@ -29,6 +29,8 @@ for _name, _dims, _doc in [("losses0", (4,), "losses carried in from the input s
                            ("eacc", (1,), "cumulative wall work [J]"),
                            ("ke_limit", (1,), "kinetic-energy guard limit [J]")]:
     register(Field(f"checkpoint/{_name}", "f", _dims, "J", _doc, writer="stage dem"))
+register(Field("checkpoint/wall_rate", "f", ("n_w",), "m/s", "rate of change of each pressure-loaded cylinder's "
+               "radius", writer="stage dem", required=False))
 
 MOTION = Tagged("mode", {
     "fixed": Section({}),
@@ -40,6 +42,11 @@ MOTION = Tagged("mode", {
         "max_speed": Float("m/s", min=0, min_inclusive=False, default=1.0),
         "area": Optional(Float("m^2", min=0, min_inclusive=False), doc="loaded area (default: from the box)"),
     }),
+    "pressure": Section({
+        "pressure": Float("Pa", min=0, doc="confining pressure on the particles"),
+        "mass": Float("kg", min=0, min_inclusive=False, doc="membrane mass (its radius is its coordinate)"),
+        "area": Optional(Float("m^2", min=0, min_inclusive=False), doc="loaded area (default: 2 pi r h)"),
+    }, doc="cylinders only: a membrane whose radius moves under a constant pressure"),
     "force": Section({
         "force": Float("N", doc="mean force pushing the wall into the domain"),
         "amplitude": Float("N", min=0, default=0.0),
@@ -79,6 +86,40 @@ CONTACT_PAIR = Section({
     "cn": Optional(Float("N*s/m", min=0)),
 })
 
+_DASHPOT = Section({"km": Float("N/m", min=0, min_inclusive=False, doc="Maxwell spring K_m"),
+                    "cm": Float("N*s/m", min=0, min_inclusive=False, doc="Maxwell dashpot C_m"),
+                    "kk": Float("N/m", min=0, min_inclusive=False, doc="Kelvin spring K_k"),
+                    "ck": Float("N*s/m", min=0, doc="Kelvin dashpot C_k (0: a plain spring)")},
+                   doc="a Burgers element: Maxwell (K_m, C_m) in series with Kelvin (K_k || C_k)")
+_STRENGTHS = {"normal_strength": Optional(Float(min=0, min_inclusive=False), doc="tensile strength (default: none)"),
+              "shear_strength": Optional(Float(min=0, min_inclusive=False), doc="shear strength (default: none)")}
+_MATS = List(Str(), min_len=2, max_len=2, doc="the material pair it bonds")
+BOND_MODEL = Tagged("model", {
+    "contact_bond": Section({"materials": _MATS, "kn": Float("N/m", min=0, min_inclusive=False),
+                             "ks": Float("N/m", min=0, min_inclusive=False), **_STRENGTHS},
+                            doc="point springs, tension allowed; strengths in N; force only"),
+    "parallel_bond": Section({"materials": _MATS,
+                              "bond_kn": Float("Pa/m", min=0, min_inclusive=False, doc="normal stiffness per area"),
+                              "bond_ks": Float("Pa/m", min=0, min_inclusive=False, doc="shear stiffness per area"),
+                              "radius_multiplier": Float(min=0, min_inclusive=False, default=1.0,
+                                                         doc="bond radius / smaller sphere radius"),
+                              **_STRENGTHS},
+                             doc="a bonded disc beside the contact: force and moment; strengths in Pa"),
+    "burgers": Section({"materials": _MATS,
+                        "kn": Float("N/m", min=0, min_inclusive=False, doc="normal stiffness in compression"),
+                        "tension": _DASHPOT, "shear": _DASHPOT, **_STRENGTHS},
+                       doc="seed 003: compression elastic, normal tension and shear Burgers; strengths in N"),
+}, doc="a bond model for one material pair")
+
+BOND_MODELS = List(BOND_MODEL, min_len=1, doc="bond models by material pair (replace stored ones of that pair)")
+BONDS = Optional(Section({
+    "models": List(BOND_MODEL, default=(), doc="bond models by material pair (replace stored ones of that pair)"),
+    "from_phases": Bool(default=False, doc="take the models from the state's phase table (mastic stage, seed 000): "
+                        "its contact and parallel bonds, and the linear + slip law of every phase pair"),
+    "create": Bool(default=False, doc="bond every touching pair whose materials have a model at the stage start"),
+    "gap": Float(min=0, default=1e-6, doc="pairs closer than gap x mean radius count as touching"),
+}), doc="bonds between spheres (a state that holds bonds keeps them active without this key)")
+
 FIELDS = {
     "physics": Section({
         "gravity": Optional(Vector(3, "m/s^2"), doc="gravity vector; omit for none"),
@@ -102,6 +143,7 @@ FIELDS = {
         "pairs": List(CONTACT_PAIR, default=(), doc="per material pair overrides"),
     }, default={}),
     "walls": List(WALL, default=(), doc="rigid walls"),
+    "bonds": BONDS,
     "time": Section({
         "duration": Optional(Float("s", min=0, min_inclusive=False)),
         "steps": Optional(Int(min=1)),
@@ -125,7 +167,7 @@ FIELDS = {
                            doc="multiplies every Young's modulus (and linear kn, kt): time step / sqrt(factor); "
                                "overlaps and contact compliance grow by 1/factor (sphere Hertz: 1/factor^(2/3))"),
         "mass": Float(min=1, default=1.0,
-                      doc="polyhedra: multiplies every body's mass and inertia but not its weight (gravity "
+                      doc="multiplies every body's mass and inertia but not its weight (gravity "
                           "divided by it): time step x sqrt(factor); for quasi-static stages only; a power of "
                           "2 so that scaling and unscaling are exact"),
     }, default={}, doc="cost knobs (docs/scaling.md): off by default"),
@@ -156,6 +198,21 @@ def _check(node, report):
             report(f"contact.pairs.{k}.friction", "physics.friction is off", p.friction)
         if p.rolling_friction is not None and not node.physics.rolling_resistance:
             report(f"contact.pairs.{k}.rolling_friction", "physics.rolling_resistance is off", p.rolling_friction)
+    if node.get("bonds") is not None:
+        if not node.bonds.models and not node.bonds.from_phases:
+            report("bonds.models", "give bond models or from_phases: true", None)
+        if node.bonds.from_phases and node.contact.law != "linear":
+            report("contact.law", "bonds.from_phases sets linear springs per phase pair: use law: linear",
+                   node.contact.law)
+        seen = {}
+        for k, b in enumerate(node.bonds.models):
+            pair = tuple(sorted(b.materials))
+            if pair in seen:
+                report(f"bonds.models.{k}.materials", f"pair {'-'.join(pair)} already has a model "
+                       f"(bonds.models.{seen[pair]})", list(b.materials))
+            seen.setdefault(pair, k)
+        if node.scaling.stiffness != 1.0:
+            report("scaling.stiffness", "bond models are not scaled; use 1 with bonds", node.scaling.stiffness)
     m = node.scaling.mass
     if m != 1.0 and 2.0 ** round(math.log2(m)) != m:
         report("scaling.mass", "must be a power of 2 (1, 2, 4, ..., 1024) so that scaling is exact", m)
@@ -211,6 +268,83 @@ def case_materials(case, stiffness=1.0):
     return mats
 
 
+def phase_materials(ctx, groups):
+    """{phase name: material name} of a state with a phase table (each phase one material)."""
+    from demcli.stages.asphalt_mastic import _str_list
+
+    g = groups["phases"]
+    names = _str_list(g["names"])
+    mats = list(ctx.case.materials)
+    sph = np.asarray(g["sphere"], np.int64)
+    smat = np.asarray(groups["spheres"]["material"], np.int64)
+    out = {}
+    for k, name in enumerate(names):
+        used = np.unique(smat[sph == k])
+        if len(used) > 1:
+            raise InputError(f"stage {ctx.name}: bonds.from_phases needs one material per phase; phase {name} has "
+                             f"{', '.join(mats[m] for m in used)}")
+        if len(used):
+            out[name] = mats[int(used[0])]
+    return out
+
+
+def phase_models(ctx, state_groups):
+    """(bond model pairs and rows, contact-law pair overrides) from a state's phase table
+    (:func:`demcli.stages.asphalt_mastic.phase_table`): every phase pair gets linear springs
+    k_n, k_t = k_s and its friction (the law of unbonded and broken contacts); contact_bond
+    and parallel_bond pairs also a bond model with their strengths."""
+    from demcli.engine.bonds import model_row
+    from demcli.state import State
+    from demcli.stages.asphalt_mastic import phase_table
+
+    st = State()
+    st.groups.update(state_groups)
+    try:
+        table = phase_table(st)
+    except Exception as e:  # a missing or invalid table is bad input for this stage
+        raise InputError(f"stage {ctx.name}: bonds.from_phases: {e}") from None
+    pm = phase_materials(ctx, state_groups)
+    names = list(ctx.case.materials)
+    pairs, rows, overrides = [], [], []
+    for (a, b), (model, prm) in table.items():
+        if a not in pm or b not in pm:
+            continue
+        ma, mb = pm[a], pm[b]
+        overrides.append((ma, mb, {"kn": prm["kn"], "kt": prm["ks"], "friction": prm["friction"]}))
+        if model == "contact_bond":
+            rows.append(model_row("contact_bond", kn=prm["kn"], ks=prm["ks"], normal_strength=prm["cb_normal_strength"],
+                                  shear_strength=prm["cb_shear_strength"]))
+        elif model == "parallel_bond":
+            rows.append(model_row("parallel_bond", bond_kn=prm["pb_kn"], bond_ks=prm["pb_ks"],
+                                  radius_multiplier=prm["pb_radius_multiplier"],
+                                  normal_strength=prm["pb_normal_strength"], shear_strength=prm["pb_shear_strength"]))
+        else:
+            continue
+        pairs.append((names.index(ma), names.index(mb)))
+    return pairs, rows, tuple(overrides)
+
+
+def set_bond_models(ctx, bonds_cfg, system, groups=None):
+    """The stage's bond models into the system (by material pair, replacing stored ones);
+    with ``from_phases`` first those of the state's phase table."""
+    from demcli.engine.bonds import model_row
+
+    names = list(ctx.case.materials)
+    pairs, rows = [], []
+    if bonds_cfg.get("from_phases"):
+        pairs, rows, _ = phase_models(ctx, groups)
+    for k, b in enumerate(bonds_cfg.models):
+        for m in b.materials:
+            if m not in names:
+                raise InputError(f"stage {ctx.name}: bonds.models.{k}.materials: unknown material {m!r} "
+                                 f"(case materials: {', '.join(names)})")
+        params = {key: b[key] for key in b.keys() if key not in ("model", "materials") and b[key] is not None}
+        params = {key: (dict(v.to_dict()) if hasattr(v, "to_dict") else v) for key, v in params.items()}
+        pairs.append(tuple(names.index(m) for m in b.materials))
+        rows.append(model_row(b.model, **params))
+    system.bonds.set_models(pairs, rows)
+
+
 def build_walls(cfg, case):
     """Walls of the stage config as arrays (box walls become up to six planes)."""
     from demcli.engine.system import Walls
@@ -232,6 +366,11 @@ def build_walls(cfg, case):
             prm[W.W_GAIN] = motion.gain
             prm[W.W_VMAX] = motion.max_speed
             prm[W.W_AREA] = motion.area if motion.area is not None else area
+        elif mode == "pressure":
+            control = W.PRESSURE
+            prm[W.W_TARGET] = motion.pressure
+            prm[W.W_MASS] = motion.mass
+            prm[W.W_AREA] = motion.area if motion.area is not None else area
         elif mode == "force":
             control = W.FORCE
             prm[W.W_TARGET] = motion.force
@@ -251,7 +390,8 @@ def build_walls(cfg, case):
             ext = np.r_[b - w.radius, b + w.radius]
             ext[5] = b[2] + w.height
             ext[2] = b[2]
-            add(w.name or f"wall{k}", W.CYLINDER, w.base, w.axis, w.radius, w.material, w.motion, ext, math.nan)
+            add(w.name or f"wall{k}", W.CYLINDER, w.base, w.axis, w.radius, w.material, w.motion, ext,
+                2.0 * math.pi * w.radius * w.height)
         else:
             lo, hi = np.array(w.min), np.array(w.max)
             ext = np.r_[lo, hi]
@@ -272,6 +412,12 @@ def build_walls(cfg, case):
                       radius=np.array([r[4] for r in rows], float), material=np.array([r[5] for r in rows], np.int64),
                       control=np.array([r[6] for r in rows], np.int8), prm=np.array([r[7] for r in rows]),
                       v=np.array([r[8] for r in rows]), extent=np.array([r[9] for r in rows]))
+    cyl = walls.kind == W.CYLINDER
+    bad = [walls.name[i] for i in range(len(walls)) if (walls.control[i] == W.PRESSURE and not cyl[i]) or
+           (cyl[i] and walls.control[i] in (W.SERVO, W.FORCE))]
+    if bad:
+        raise InputError(f"walls {bad}: mode pressure is for cylinder walls; a cylinder takes fixed, velocity or "
+                         "pressure")
     bad = [walls.name[i] for i in range(len(walls)) if walls.control[i] == W.SERVO and not walls.prm[i, W.W_AREA] > 0]
     if bad:
         raise InputError(f"servo walls {bad} need motion.area (only box faces know their area)")
@@ -301,7 +447,11 @@ def make_system(ctx, cfg, groups, time=0.0, step=0, resume=False):
     if poly and ("energy" in declared or "rolling_resistance" in declared or "planar" in declared):
         raise InputError(f"stage {ctx.name}: polyhedral bodies support gravity, friction and damping "
                          "(energy book-keeping, rolling resistance and 2D are for spheres)")
-    plan = make_plan(declared, clumps=not poly and _is_clumped(groups), walls=len(walls) > 0, polyhedra=poly)
+    bonded = cfg.get("bonds") is not None or len(groups.get("bonds", {}).get("i", ())) > 0
+    if poly and bonded:
+        raise InputError(f"stage {ctx.name}: bonds join spheres; the scene holds polyhedra")
+    plan = make_plan(declared, clumps=not poly and _is_clumped(groups), walls=len(walls) > 0, polyhedra=poly,
+                     bonds=bonded)
     p = cfg.physics
     dyn = Dynamics(gravity=tuple(p.gravity) if p.gravity is not None else (0.0, 0.0, 0.0),
                    local_damping=p.local_damping or 0.0, viscous_damping=p.viscous_damping or 0.0,
@@ -309,15 +459,23 @@ def make_system(ctx, cfg, groups, time=0.0, step=0, resume=False):
                    overlap_limit=cfg.safety.overlap_limit, energy_limit=cfg.safety.energy_limit)
     extra = {}
     if cfg.scaling.mass != 1.0:
-        if not poly:
-            raise InputError(f"stage {ctx.name}: scaling.mass is for polyhedral bodies only")
         extra["mass_scale"] = cfg.scaling.mass
     if poly:
         from demcli.engine.poly_system import PolySystem as System  # noqa: F811
-    system = System(groups, case_materials(ctx.case, cfg.scaling.stiffness), contact_model(cfg), plan, walls,
+    model = contact_model(cfg)
+    if cfg.get("bonds") is not None and cfg.bonds.from_phases:
+        import dataclasses
+
+        model = dataclasses.replace(model, pairs=phase_models(ctx, groups)[2] + model.pairs)
+    system = System(groups, case_materials(ctx.case, cfg.scaling.stiffness), model, plan, walls,
                     dyn, dt=1.0, time=time, step=step, **extra)
     if p.adaptive_damping is not None and not resume:  # a resumed stage keeps its adapted alpha
         system.alpha = float(p.adaptive_damping.initial)
+    if cfg.get("bonds") is not None:
+        set_bond_models(ctx, cfg.bonds, system, groups)
+        if cfg.bonds.create and not resume:
+            n = system.bond_touching(cfg.bonds.gap * float(system.rad.mean()))
+            ctx.log(f"bonded {n} touching pairs ({len(system.bonds)} bonds)")
     dt_crit = system.critical_dt()
     if cfg.time.dt is not None:
         dt = cfg.time.dt
@@ -429,8 +587,13 @@ def integrate(ctx, cfg, state_in, hooks=None):
                                             else 0.0, step=int(source.meta.get("step", 0)) if ckpt else 0,
                                             resume=ckpt is not None)
     if ckpt is not None:
+        from demcli.kernels.walls import W_RATE
+
         system.wpoint[:] = groups["walls"]["point"]
         system.wv[:] = groups["walls"]["v"]
+        system.walls.radius[:] = groups["walls"]["radius"]
+        if "wall_rate" in groups["checkpoint"]:
+            system.walls.prm[:, W_RATE] = groups["checkpoint"]["wall_rate"]
         c = groups["checkpoint"]
         system.losses0 = dict(zip(("damping", "friction", "body_damping", "wall_work"), map(float, c["losses0"])))
         if len(system.esph):
@@ -462,6 +625,8 @@ def integrate(ctx, cfg, state_in, hooks=None):
                                       "total")})
     if plan.has("adaptive_damping"):
         cols["alpha"] = "1/s"
+    if plan.has("bonds"):
+        cols.update({"bonds_intact": "1", "broken_tension": "1", "broken_shear": "1"})
     cols.update(hooks.columns)
     if ckpt is not None:
         table = RecordTable.from_state(ckpt, "dem")
@@ -493,6 +658,10 @@ def integrate(ctx, cfg, state_in, hooks=None):
             row["kinetic"] = ke
         if plan.has("adaptive_damping"):
             row["alpha"] = system.alpha
+        if plan.has("bonds"):
+            c = system.bonds.counts()
+            row.update({"bonds_intact": c["intact"], "broken_tension": c["broken_tension"],
+                        "broken_shear": c["broken_shear"]})
         if hooks.row is not None:
             row.update(hooks.row(system))
         table.append(row)
@@ -551,6 +720,10 @@ def integrate(ctx, cfg, state_in, hooks=None):
             "losses0": np.array([system.losses0[k] for k in ("damping", "friction", "body_damping", "wall_work")]),
             "esph": system.esph.copy(), "ebody": system.ebody.copy(), "eacc": system.eacc.copy(),
             "ke_limit": np.array([system.ke_limit])}}
+        if len(system.walls):
+            from demcli.kernels.walls import W_RATE
+
+            extra["checkpoint"]["wall_rate"] = system.walls.prm[:, W_RATE].copy()
         st = ctx.state_from(system, plan, extra=extra)
         table.to_state(st)  # rows end at the last good step, which was taken right after a record
         if wtable is not None:

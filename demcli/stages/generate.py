@@ -87,7 +87,7 @@ def _lattice(lo, hi, radii, planar):
     return pos
 
 
-def _cell_order(pos, cell):
+def cell_order(pos, cell):
     """Indices sorting points by the cell they fall in (x fastest, z slowest), stable."""
     c = np.floor((pos - pos.min(axis=0)) / cell).astype(np.int64)
     return np.lexsort((c[:, 0], c[:, 1], c[:, 2]))
@@ -130,7 +130,7 @@ def run(ctx, cfg, state_in):
                              "enlarge the region or lower the count")
     # particles are stored in cell order (cells of 2 r_max, z slowest): neighbours sit close in
     # memory, which the contact loops rely on for cache locality
-    order = _cell_order(pos, 2.0 * env.max())
+    order = cell_order(pos, 2.0 * env.max())
     pos, radii, env = pos[order], radii[order], env[order]
     vel = rng.uniform(-cfg.velocity, cfg.velocity, (n, 3)) if cfg.velocity > 0 else np.zeros((n, 3))
     if planar:

@@ -11,6 +11,7 @@ from click.testing import CliRunner
 
 from demcli import run_case
 from demcli.cli import cli
+from demcli.compare import read_record
 from demcli.state import read_state
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -26,13 +27,8 @@ def chain(tmp_path_factory):
 
 
 def _csv(path):
-    """Columns of a record CSV by name (units in the header dropped)."""
-    import csv
-
-    with open(path) as f:
-        rows = list(csv.reader(line for line in f if not line.startswith("#")))
-    names = [h.split("[")[0] for h in rows[0]]
-    return {n: np.array([float(r[k]) for r in rows[1:]]) for k, n in enumerate(names)}
+    """Columns of a record CSV by name."""
+    return read_record(path)[0]
 
 
 def _mass_and_density(st):
@@ -201,10 +197,8 @@ def test_compare_overlays_the_runs_records(chain, tmp_path):
     assert bad.exit_code == 2 and "not a run folder" in bad.output
 
 
-def test_interrupted_sleeper_stage_resumes_bit_identically(chain, tmp_path, monkeypatch):
+def test_interrupted_sleeper_stage_resumes_bit_identically(chain, tmp_path, monkeypatch, h5_differences):
     import shutil
-
-    import h5py
 
     from demcli.engine import poly_system
     from demcli.errors import StageError
@@ -230,12 +224,4 @@ def test_interrupted_sleeper_stage_resumes_bit_identically(chain, tmp_path, monk
     run_case(SMOKE, out=tmp_path, quiet=True, resume=True)
 
     # Then: the sleeper state equals the uninterrupted run's, dataset for dataset
-    def datasets(path):
-        out = {}
-        with h5py.File(path, "r") as f:
-            f.visititems(lambda name, obj: out.__setitem__(name, obj[()]) if isinstance(obj, h5py.Dataset) else None)
-        return out
-
-    a, b = datasets(chain / "05-sleeper.h5"), datasets(tmp_path / "05-sleeper.h5")
-    assert sorted(a) == sorted(b)
-    assert [k for k in a if not np.array_equal(np.asarray(a[k]), np.asarray(b[k]))] == []
+    assert h5_differences(chain / "05-sleeper.h5", tmp_path / "05-sleeper.h5") == []

@@ -1,0 +1,367 @@
+"""Bonded contacts between spheres: contact bonds, parallel bonds and Burgers bonds.
+
+A bond joins two spheres i < j from its creation until it breaks; it is kept in its own
+list (CSR by i, sorted by j, like the pair list) and evaluated by :func:`bond_pass`
+whether the spheres touch or not. Sign conventions are those of
+:mod:`demcli.kernels.contact`: n points from j to i, ``v`` is the velocity of i's contact
+point relative to j's, forces and moments returned act on i (minus on j). Positive
+normal force is compression. The contact point sits in the middle of the overlap or gap,
+at a_i = r_i - delta/2 from i's centre (delta = r_i + r_j - d, negative for a gap).
+
+Models (``B_KIND`` of a model row, PFC's bond models; Potyondy & Cundall 2004):
+
+* ``CONTACT_BOND`` -- point springs replacing the contact while intact:
+  F_n = k_n delta (tension allowed), dF_s = -k_s v_t dt; breaks in tension when
+  -F_n >= s_n and in shear when |F_s| >= s_s (strengths in N); force only, no moment.
+  Once broken, the pair is an ordinary contact of the stage's contact law (linear with
+  slip in the asphalt cases).
+* ``PARALLEL_BOND`` -- a disc of radius R = lambda min(r_i, r_j) in parallel with the
+  contact (which the contact law keeps computing): A = pi R^2, I = pi R^4 / 4,
+  J = pi R^4 / 2; increments from the bond's creation dF_n = -kn_b A v_n dt,
+  dF_s = -ks_b A v_t dt, dM_t = -ks_b J w_n dt (twist), dM_b = -kn_b I w_t dt (bending),
+  w the relative angular velocity; largest stresses sigma = -F_n / A + |M_b| R / I and
+  tau = |F_s| / A + |M_t| R / J; breaks in tension when sigma >= sigma_c, else in shear
+  when tau >= tau_c (strengths in Pa).
+* ``BURGERS`` -- the viscoelastic bond of seed 003 (Collop, McDowell & Lee 2006),
+  replacing the contact while intact: normal compression elastic, F_n = k_n delta for
+  delta >= 0; normal tension and shear each a Burgers element (Maxwell spring K_m and
+  dashpot C_m in series with a Kelvin spring K_k parallel to a dashpot C_k), advanced by
+  :func:`burgers_update`; optional strengths (N) as for the contact bond.
+
+History of a bond (columns ``H_*`` of ``hist``): the force on i split into its normal
+part (tension element force for Burgers) and shear vector, the twist and bending moments,
+the Kelvin displacements (Burgers) and the previous separation (Burgers tension).
+"""
+
+import math
+
+import numpy as np
+from numba import prange
+
+from demcli.jit import njit
+from demcli.kernels.contact import _to_tangent_plane, pair_kinematics
+
+CONTACT_BOND = 0
+PARALLEL_BOND = 1
+BURGERS = 2
+KIND_NAMES = ("contact_bond", "parallel_bond", "burgers")
+
+# columns of the bond-model table bprm[m, :]
+B_KIND = 0     # CONTACT_BOND, PARALLEL_BOND or BURGERS
+B_KN = 1       # point normal stiffness [N/m] (contact bond; Burgers compression)
+B_KS = 2       # point shear stiffness [N/m] (contact bond)
+B_SN = 3       # normal (tensile) strength: N (contact bond, Burgers) or Pa (parallel bond); inf: none
+B_SS = 4       # shear strength: N or Pa; inf: none
+B_PKN = 5      # parallel bond normal stiffness per area [Pa/m]
+B_PKS = 6      # parallel bond shear stiffness per area [Pa/m]
+B_LAMBDA = 7   # parallel bond radius multiplier [-]
+B_KMN = 8      # Burgers, normal tension: Maxwell spring [N/m]
+B_CMN = 9      # Maxwell dashpot [N s/m]
+B_KKN = 10     # Kelvin spring [N/m]
+B_CKN = 11     # Kelvin dashpot [N s/m]
+B_KMS = 12     # Burgers, shear: Maxwell spring [N/m]
+B_CMS = 13
+B_KKS = 14
+B_CKS = 15
+N_BPARAMS = 16
+
+# columns of the bond history hist[b, :]
+H_FN = 0       # normal force on i [N], compression positive (Burgers: tension element force, >= 0 pulls)
+H_FS = 1       # shear force on i [N], 3 columns
+H_MT = 4       # twist moment on i about n [N m] (parallel bond)
+H_MB = 5       # bending moment on i [N m], 3 columns (parallel bond)
+H_UKN = 8      # Kelvin displacement, normal tension [m] (Burgers)
+H_UKS = 9      # Kelvin displacement, shear [m], 3 columns (Burgers)
+H_SEP = 12     # separation max(-delta, 0) at the last step [m] (Burgers)
+N_HIST = 13
+
+# state of a bond
+INTACT = 0
+BROKEN_TENSION = 1
+BROKEN_SHEAR = 2
+
+
+@njit(inline="always")
+def burgers_update(s, uk, du, dt, km, cm, kk, ck):
+    """One step of a Burgers element driven by the displacement increment ``du`` [m].
+
+    The element force s [N] (elongation positive) is taken linear in time over the step;
+    under that assumption every part is integrated exactly: the Maxwell spring
+    du_m = ds / K_m, the Maxwell dashpot du_c = dt (s_0 + s_1) / (2 C_m) and the Kelvin
+    element tau u_k' + u_k = s / K_k (tau = C_k / K_k), whose exact solution for a linear
+    force is u_k1 = u_k0 e + s_0 (1 - e) / K_k + ds (1 - g) / K_k with e = exp(-dt / tau)
+    and g = tau (1 - e) / dt. Adding the parts, du = ds [1/K_m + dt/(2 C_m) + (1 - g)/K_k]
+    + dt s_0 / C_m - (1 - e)(u_k0 - s_0 / K_k), is solved for ds: the update is
+    unconditionally stable and exact under constant force (creep) for any dt / tau.
+
+    Returns (s1, uk1, dissipated energy [J]): the work 0.5 (s_0 + s_1) du less the change
+    of the energy stored in the springs, s^2 / (2 K_m) + K_k u_k^2 / 2.
+    """
+    if ck > 0.0:
+        r = dt / (ck / kk)
+        e = math.exp(-r)
+        g = (1.0 - e) / r if r > 0.0 else 1.0
+    else:
+        e = 0.0
+        g = 0.0
+    ds = (du - dt * s / cm + (1.0 - e) * (uk - s / kk)) / (1.0 / km + 0.5 * dt / cm + (1.0 - g) / kk)
+    s1 = s + ds
+    uk1 = uk * e + (s * (1.0 - e) + ds * (1.0 - g)) / kk
+    stored = (s1 * s1 - s * s) / (2.0 * km) + 0.5 * kk * (uk1 * uk1 - uk * uk)
+    return s1, uk1, 0.5 * (s + s1) * du - stored
+
+
+@njit(inline="always")
+def _rotate_vec(h, b, col, nx, ny, nz):
+    """History vector columns col..col+2 of row b turned into the current tangent plane."""
+    return _to_tangent_plane(h[b, col], h[b, col + 1], h[b, col + 2], nx, ny, nz)
+
+
+@njit(inline="always")
+def bond_energy(p, hist, b, delta, ri, rj):
+    """Elastic energy stored in bond b [J] (springs only; dashpots store none)."""
+    kind = p[B_KIND]
+    fs2 = hist[b, H_FS] ** 2 + hist[b, H_FS + 1] ** 2 + hist[b, H_FS + 2] ** 2
+    if kind == CONTACT_BOND:
+        return 0.5 * p[B_KN] * delta * delta + 0.5 * fs2 / p[B_KS]
+    if kind == PARALLEL_BOND:
+        rb = p[B_LAMBDA] * min(ri, rj)
+        area = math.pi * rb * rb
+        inert = 0.25 * area * rb * rb
+        mb2 = hist[b, H_MB] ** 2 + hist[b, H_MB + 1] ** 2 + hist[b, H_MB + 2] ** 2
+        return 0.5 * (hist[b, H_FN] ** 2 / (p[B_PKN] * area) + fs2 / (p[B_PKS] * area)
+                      + hist[b, H_MT] ** 2 / (p[B_PKS] * 2.0 * inert) + mb2 / (p[B_PKN] * inert))
+    uks2 = hist[b, H_UKS] ** 2 + hist[b, H_UKS + 1] ** 2 + hist[b, H_UKS + 2] ** 2
+    e = 0.5 * fs2 / p[B_KMS] + 0.5 * p[B_KKS] * uks2
+    if delta >= 0.0:
+        return e + 0.5 * p[B_KN] * delta * delta
+    return e + 0.5 * hist[b, H_FN] ** 2 / p[B_KMN] + 0.5 * p[B_KKN] * hist[b, H_UKN] ** 2
+
+
+@njit(inline="always")
+def bond_law(p, hist, b, delta, nx, ny, nz, vx, vy, vz, wx, wy, wz, ri, rj, dt):
+    """Force and moment on i from bond b; updates its history row in place.
+
+    Args:
+        p: (N_BPARAMS,) model row; hist: (n_bonds, N_HIST) history.
+        delta: r_i + r_j - d [m] (negative: a gap); n: unit normal from j to i.
+        v: contact-point velocity of i relative to j [m/s]; w: omega_i - omega_j [rad/s].
+        ri, rj: radii [m]; dt: time step [s].
+
+    Returns:
+        (fx, fy, fz, mx, my, mz, e_diss, state): force [N] and moment [N m] on i (moments
+        without the branch torques), energy dissipated this step [J], INTACT or the mode in
+        which the bond broke this step (then force and moment are zero).
+    """
+    kind = p[B_KIND]
+    vn = vx * nx + vy * ny + vz * nz
+    vtx = vx - vn * nx
+    vty = vy - vn * ny
+    vtz = vz - vn * nz
+    sx, sy, sz = _rotate_vec(hist, b, H_FS, nx, ny, nz)
+    mx = 0.0
+    my = 0.0
+    mz = 0.0
+    e_diss = 0.0
+    state = INTACT
+    if kind == CONTACT_BOND:
+        fn = p[B_KN] * delta
+        sx -= p[B_KS] * vtx * dt
+        sy -= p[B_KS] * vty * dt
+        sz -= p[B_KS] * vtz * dt
+        if -fn >= p[B_SN]:
+            state = BROKEN_TENSION
+        elif sx * sx + sy * sy + sz * sz >= p[B_SS] * p[B_SS]:
+            state = BROKEN_SHEAR
+    elif kind == PARALLEL_BOND:
+        rb = p[B_LAMBDA] * min(ri, rj)
+        area = math.pi * rb * rb
+        inert = 0.25 * area * rb * rb
+        polar = 2.0 * inert
+        fn = hist[b, H_FN] - p[B_PKN] * area * vn * dt
+        sx -= p[B_PKS] * area * vtx * dt
+        sy -= p[B_PKS] * area * vty * dt
+        sz -= p[B_PKS] * area * vtz * dt
+        wn = wx * nx + wy * ny + wz * nz
+        mt = hist[b, H_MT] - p[B_PKS] * polar * wn * dt
+        bx, by, bz = _rotate_vec(hist, b, H_MB, nx, ny, nz)
+        bx -= p[B_PKN] * inert * (wx - wn * nx) * dt
+        by -= p[B_PKN] * inert * (wy - wn * ny) * dt
+        bz -= p[B_PKN] * inert * (wz - wn * nz) * dt
+        mb = math.sqrt(bx * bx + by * by + bz * bz)
+        sigma = -fn / area + mb * rb / inert
+        tau = math.sqrt(sx * sx + sy * sy + sz * sz) / area + abs(mt) * rb / polar
+        if sigma >= p[B_SN]:
+            state = BROKEN_TENSION
+        elif tau >= p[B_SS]:
+            state = BROKEN_SHEAR
+        hist[b, H_MT] = mt
+        hist[b, H_MB] = bx
+        hist[b, H_MB + 1] = by
+        hist[b, H_MB + 2] = bz
+        mx = mt * nx + bx
+        my = mt * ny + by
+        mz = mt * nz + bz
+    else:  # BURGERS
+        sep = -delta if delta < 0.0 else 0.0
+        if delta >= 0.0:  # compression: elastic; the tension element restarts unloaded
+            fn = p[B_KN] * delta
+            # The element's energy is lost with it, less the work its force s_0 (from the step
+            # before, gap g) did in this step, which closes the gap: the integrator's trapezoid
+            # gives that force half the step's displacement g + delta. Without that term the
+            # balance lost s_0 (g + delta) / 2 at every closing, first order in dt once the
+            # dashpots have crept (s_0 of either sign, not small: -7.4e-3 of the energy over 37
+            # closings at 0.05 x the critical step, against 5e-4 with it).
+            e_diss += (0.5 * hist[b, H_FN] ** 2 / p[B_KMN] + 0.5 * p[B_KKN] * hist[b, H_UKN] ** 2
+                       - 0.5 * hist[b, H_FN] * (hist[b, H_SEP] + delta))
+            hist[b, H_FN] = 0.0
+            hist[b, H_UKN] = 0.0
+        else:
+            t1, uk1, ed = burgers_update(hist[b, H_FN], hist[b, H_UKN], sep - hist[b, H_SEP], dt,
+                                         p[B_KMN], p[B_CMN], p[B_KKN], p[B_CKN])
+            hist[b, H_FN] = t1
+            hist[b, H_UKN] = uk1
+            e_diss += ed
+            fn = -t1
+        hist[b, H_SEP] = sep
+        # shear: the element's elongation is i's tangential displacement, its force -F_s
+        kx, ky, kz = _rotate_vec(hist, b, H_UKS, nx, ny, nz)
+        ex, kx, ed0 = burgers_update(-sx, kx, vtx * dt, dt, p[B_KMS], p[B_CMS], p[B_KKS], p[B_CKS])
+        ey, ky, ed1 = burgers_update(-sy, ky, vty * dt, dt, p[B_KMS], p[B_CMS], p[B_KKS], p[B_CKS])
+        ez, kz, ed2 = burgers_update(-sz, kz, vtz * dt, dt, p[B_KMS], p[B_CMS], p[B_KKS], p[B_CKS])
+        e_diss += ed0 + ed1 + ed2
+        sx = -ex
+        sy = -ey
+        sz = -ez
+        hist[b, H_UKS] = kx
+        hist[b, H_UKS + 1] = ky
+        hist[b, H_UKS + 2] = kz
+        if -fn >= p[B_SN]:
+            state = BROKEN_TENSION
+        elif sx * sx + sy * sy + sz * sz >= p[B_SS] * p[B_SS]:
+            state = BROKEN_SHEAR
+    if kind != BURGERS:
+        hist[b, H_FN] = fn
+    hist[b, H_FS] = sx
+    hist[b, H_FS + 1] = sy
+    hist[b, H_FS + 2] = sz
+    if state != INTACT:  # the energy the bond held is lost with it
+        e_diss += bond_energy(p, hist, b, delta, ri, rj)
+        for col in range(N_HIST):
+            hist[b, col] = 0.0
+        return 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, e_diss, state
+    return fn * nx + sx, fn * ny + sy, fn * nz + sz, mx, my, mz, e_diss, state
+
+
+@njit(parallel=True)
+def bond_pass(bstart, bj, bmodel, bstate, hist, bprm, xs, vs, ws, rad, dt, bfc, btj, bed,
+              frow, trow, erow, energy, broke):
+    """Every intact bond's force into its own row; i's side summed into frow/trow/erow[i].
+
+    Runs after the pair pass (which wrote frow[i] and trow[i]) and before
+    :func:`bond_gather`; rows of the bond CSR are owned by i, so it is race-free and the
+    sums keep a fixed order. A bond that breaks sets its state and ``broke[0]`` (the pair
+    list is rebuilt so that the pair becomes an ordinary contact).
+    """
+    for i in prange(bstart.shape[0] - 1):
+        ri = rad[i]
+        for b in range(bstart[i], bstart[i + 1]):
+            if bstate[b] != INTACT:  # its rows stay zero since it broke
+                if energy:
+                    bed[b] = 0.0
+                continue
+            j = bj[b]
+            rj = rad[j]
+            dx = xs[i, 0] - xs[j, 0]
+            dy = xs[i, 1] - xs[j, 1]
+            dz = xs[i, 2] - xs[j, 2]
+            d = math.sqrt(dx * dx + dy * dy + dz * dz)
+            nx = dx / d
+            ny = dy / d
+            nz = dz / d
+            delta = ri + rj - d
+            ai = ri - 0.5 * delta
+            aj = rj - 0.5 * delta
+            vx, vy, vz, wx, wy, wz = pair_kinematics(vs, ws, i, j, nx, ny, nz, ai, aj)
+            fx, fy, fz, mx, my, mz, ed, state = bond_law(
+                bprm[bmodel[b]], hist, b, delta, nx, ny, nz, vx, vy, vz, wx, wy, wz, ri, rj, dt)
+            if state != INTACT:
+                bstate[b] = state
+                broke[0] = 1
+            cx = ny * fz - nz * fy
+            cy = nz * fx - nx * fz
+            cz = nx * fy - ny * fx
+            bfc[b, 0] = fx
+            bfc[b, 1] = fy
+            bfc[b, 2] = fz
+            btj[b, 0] = -aj * cx - mx
+            btj[b, 1] = -aj * cy - my
+            btj[b, 2] = -aj * cz - mz
+            frow[i, 0] += fx
+            frow[i, 1] += fy
+            frow[i, 2] += fz
+            trow[i, 0] += -ai * cx + mx
+            trow[i, 1] += -ai * cy + my
+            trow[i, 2] += -ai * cz + mz
+            if energy:
+                bed[b] = ed
+                erow[i, 0] += ed
+
+
+@njit(parallel=True)
+def bond_gather(brstart, brlist, bfc, btj, bed, frow, trow, erow, energy):
+    """j's side of every bond into frow/trow/erow[j] (fixed order, race-free); broken
+    bonds have zero rows."""
+    for j in prange(brstart.shape[0] - 1):
+        for a in range(brstart[j], brstart[j + 1]):
+            b = brlist[a]
+            frow[j, 0] -= bfc[b, 0]
+            frow[j, 1] -= bfc[b, 1]
+            frow[j, 2] -= bfc[b, 2]
+            trow[j, 0] += btj[b, 0]
+            trow[j, 1] += btj[b, 1]
+            trow[j, 2] += btj[b, 2]
+            if energy:
+                erow[j, 0] += bed[b]
+
+
+@njit
+def drop_bonded(start, pi, pj, bstart, bj, bmodel, bstate, bprm):
+    """The pair list without the pairs an intact contact or Burgers bond replaces.
+
+    Both lists are CSR by i and sorted by j inside a row; parallel bonds act beside the
+    contact and keep their pair. Returns (start, pi, pj) of the kept pairs.
+    """
+    n = start.shape[0] - 1
+    keep = np.ones(pj.shape[0], np.bool_)
+    for i in range(n):
+        b = bstart[i]
+        b1 = bstart[i + 1]
+        for c in range(start[i], start[i + 1]):
+            while b < b1 and bj[b] < pj[c]:
+                b += 1
+            if b < b1 and bj[b] == pj[c] and bstate[b] == INTACT and bprm[bmodel[b], B_KIND] != PARALLEL_BOND:
+                keep[c] = False
+    nstart = np.zeros(n + 1, np.int64)
+    for i in range(n):
+        cnt = 0
+        for c in range(start[i], start[i + 1]):
+            if keep[c]:
+                cnt += 1
+        nstart[i + 1] = nstart[i] + cnt
+    idx = np.nonzero(keep)[0]
+    return nstart, pi[idx].copy(), pj[idx].copy()
+
+
+@njit
+def bond_strain_energy(bstart, bj, bmodel, bstate, hist, bprm, xs, rad):
+    """Elastic energy held by all intact bonds [J] (serial, fixed order)."""
+    e = 0.0
+    for i in range(bstart.shape[0] - 1):
+        for b in range(bstart[i], bstart[i + 1]):
+            if bstate[b] != INTACT:
+                continue
+            j = bj[b]
+            d = math.sqrt((xs[i, 0] - xs[j, 0]) ** 2 + (xs[i, 1] - xs[j, 1]) ** 2 + (xs[i, 2] - xs[j, 2]) ** 2)
+            e += bond_energy(bprm[bmodel[b]], hist, b, rad[i] + rad[j] - d, rad[i], rad[j])
+    return e

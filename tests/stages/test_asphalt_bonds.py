@@ -1,0 +1,84 @@
+"""Bonds by phase pair on the 3D asphalt specimen (seed 000 step 9): a ``dem`` stage after the
+mastic stage takes its contact models from the phase table (``bonds.from_phases``)."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from demcli import run_case
+from demcli.kernels.bonds import B_KIND, B_SN, B_SS, CONTACT_BOND, INTACT, PARALLEL_BOND
+from demcli.state import read_state
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+@pytest.fixture(scope="module")
+def bonded(tmp_path_factory):
+    out = tmp_path_factory.mktemp("asphalt_bonds")
+    case = yaml.safe_load((ROOT / "cases" / "smoke" / "marshall_ac13_3d.yaml").read_text())
+    case["stages"].append({"name": "bonded", "type": "dem", "physics": {"gravity": [0, 0, -9.81], "friction": True},
+                           "contact": {"law": "linear", "kn": "1e6 N/m"},
+                           "bonds": {"from_phases": True, "create": True, "gap": 1e-3},
+                           "time": {"steps": 200, "dt_factor": 0.2}, "output": {"records": 2, "snapshots": 0}})
+    path = out / "case.yaml"
+    path.write_text(yaml.safe_dump(case, sort_keys=False))
+    run_case(path, out=out / "run", quiet=True)
+    return read_state(out / "run" / "05-mastic.h5"), read_state(out / "run" / "06-bonded.h5")
+
+
+def _sphere_positions(st):
+    from scipy.spatial.transform import Rotation
+
+    b = st["spheres/body"]
+    q = st["bodies/q"][b]
+    return st["bodies/x"][b] + Rotation.from_quat(q[:, [1, 2, 3, 0]]).apply(st["spheres/offset"])
+
+
+def test_phase_pairs_pick_the_bond_models(bonded):
+    before, after = bonded
+    names = list(after["bond_models/kind"])
+    mats = after["bond_models/materials"]
+    # Then: aggregate-mastic pairs get contact bonds, mastic-mastic pairs parallel bonds, with the
+    # strengths of the phase table (smoke case: 5 N, 5 N; 1 MPa, 1 MPa); aggregate pairs none
+    kinds = {tuple(m): k for m, k in zip(mats.tolist(), names)}
+    assert kinds == {(0, 1): "contact_bond", (1, 1): "parallel_bond"}
+    prm = after["bond_models/params"]
+    cb = names.index("contact_bond")
+    pb = names.index("parallel_bond")
+    assert prm[cb, B_KIND] == CONTACT_BOND and (prm[cb, B_SN], prm[cb, B_SS]) == (5.0, 5.0)
+    assert prm[pb, B_KIND] == PARALLEL_BOND and (prm[pb, B_SN], prm[pb, B_SS]) == (1e6, 1e6)
+
+
+def test_every_touching_pair_of_bonded_phases_is_bonded(bonded):
+    from scipy.spatial import cKDTree
+
+    before, after = bonded
+    x = _sphere_positions(before)
+    r = before["spheres/radius"]
+    body = before["spheres/body"]
+    mat = before["spheres/material"]
+    gap = 1e-3 * r.mean()
+    # brute-force reference: pairs of spheres of different bodies closer than the gap, not both aggregate
+    pairs = cKDTree(x).query_pairs(2 * r.max() + gap, output_type="ndarray")
+    i, j = pairs[:, 0], pairs[:, 1]
+    d = np.linalg.norm(x[i] - x[j], axis=1)
+    touch = (d < r[i] + r[j] + gap) & (body[i] != body[j]) & ~((mat[i] == 0) & (mat[j] == 0))
+    expect = set(map(tuple, np.sort(np.c_[i[touch], j[touch]], axis=1).tolist()))
+    got = set(zip(after["bonds/i"].tolist(), after["bonds/j"].tolist()))
+    assert got == expect and len(got) > 100
+    # and each bond's model is the one of its spheres' materials
+    model = after["bonds/model"]
+    kinds = after["bond_models/kind"]
+    for b, (a, c) in enumerate(zip(after["bonds/i"], after["bonds/j"])):
+        want = "parallel_bond" if mat[a] == mat[c] == 1 else "contact_bond"
+        assert kinds[model[b]] == want
+    # and an intact contact bond replaces its contact (no such pair among the contacts), while a
+    # parallel bond acts beside it (some parallel-bonded pairs are also touching contacts)
+    contacts = set(zip(after["contacts/i"].tolist(), after["contacts/j"].tolist()))
+    intact = after["bonds/state"] == INTACT
+    cb = np.array([kinds[m] == "contact_bond" for m in model])
+    bi, bj = after["bonds/i"], after["bonds/j"]
+    assert not contacts & set(zip(bi[cb & intact].tolist(), bj[cb & intact].tolist()))
+    assert contacts & set(zip(bi[~cb].tolist(), bj[~cb].tolist()))
