@@ -58,7 +58,8 @@ def info(state):
 
 @cli.command()
 @click.argument("runs", nargs=-1, required=True, type=click.Path(file_okay=False, exists=True))
-@click.option("--record", help="Record file stem, e.g. vibrate_cycles (default: the seed-002 figures).")
+@click.option("--record", help="Record file stem, e.g. vibrate_cycles (default: the seeds' figures that all "
+                                "runs have).")
 @click.option("-x", "x", help="Column along x (default: the first).")
 @click.option("-y", "ys", multiple=True, help="Column(s) to plot (default: all others).")
 @click.option("--out", default="compare", show_default=True, type=click.Path(file_okay=False),
@@ -101,6 +102,42 @@ def study(case, varies, metric, reference, overrides, out, jobs, threads_per_job
             click.echo(str(path), err=True)
     if result.failed:
         click.echo(f"{len(result.failed)} variant(s) failed; see the status column", err=True)
+
+
+@cli.command()
+@click.argument("sweep_file", metavar="SWEEP", type=click.Path(dir_okay=False))
+@click.option("--workers", type=click.IntRange(min=1),
+              help="Dask workers, one run each at a time (local: default the free cores // threads per run; "
+                   "slurm/pbs: default one per run, at most 20).")
+@click.option("--scheduler", metavar="ADDRESS", help="Use a running Dask scheduler, e.g. tcp://node1:8786.")
+@click.option("--cluster", "cluster_type", type=click.Choice(["local", "slurm", "pbs"]),
+              help="Where to start workers (default: the sweep file's cluster.type, else local).")
+@click.option("--threads-per-run", type=click.IntRange(min=1), help="Kernel threads of each run (default 1).")
+@click.option("--out", type=click.Path(file_okay=False), help="Output folder (default: the file's out, else sweeps/<name>).")
+@click.option("--force", is_flag=True, help="Re-run stages that are up to date.")
+@click.option("--resume", is_flag=True, help="Continue stages interrupted in an earlier sweep from their checkpoints.")
+@click.option("--check", "check_only", is_flag=True, help="Validate the sweep and every run's case, list the runs; run nothing.")
+@click.option("--quiet", is_flag=True, help="No progress lines; the status table is still printed.")
+def sweep(sweep_file, workers, scheduler, cluster_type, threads_per_run, out, force, resume, check_only, quiet):
+    """Run the cases, seeds and values of SWEEP (a YAML file) on Dask; exit 1 if any run failed."""
+    from demcli.sweep import check_sweep, run_sweep
+
+    if check_only:
+        check_sweep(sweep_file, out=out, echo=click.echo)
+        return
+    log = None if quiet else (lambda line: click.echo(line, err=True))
+    result = run_sweep(sweep_file, out=out, workers=workers, scheduler=scheduler, cluster=cluster_type,
+                       threads_per_run=threads_per_run, force=force, resume=resume, log=log)
+    click.echo(result.table, nl=False)
+    for line in result.warnings:
+        click.echo(f"warning: {line}", err=True)
+    if not quiet:
+        for path in result.files:
+            click.echo(str(path), err=True)
+    if result.failed:
+        n = len(result.runs)
+        click.echo(f"{len(result.failed)} of {n} run{'s' if n != 1 else ''} failed; see the status column", err=True)
+        sys.exit(1)
 
 
 @cli.command()
