@@ -32,10 +32,10 @@ bench: $(STAMP)
 smoke: $(STAMP)
 	$(BIN)/python -m pytest -q tests/test_cases.py
 
-## clean-jit: drop numba's compiled-kernel cache (after pulling changes to kernels)
+## clean-jit: drop numba's compiled-kernel caches (each set of kernel sources has its own folder)
 clean-jit:
 	find . -name '__pycache__' -type d -path '*demcli*' -exec sh -c 'rm -f "$$1"/*.nbi "$$1"/*.nbc' _ {} \;
-	rm -rf .numba_cache
+	rm -rf .numba_cache "$${XDG_CACHE_HOME:-$$HOME/.cache}/demcli/numba"
 
 clean: clean-jit
 	rm -rf runs $(VENV)

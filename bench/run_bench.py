@@ -463,9 +463,9 @@ def main(argv=None):
 
     sieve = None if a.no_sieve else run_sieve(a.quick)
     asphalt = None if a.no_asphalt else run_asphalt(a)
-    # 2D sections; ballast library build rate; polyhedron narrow phase; the peers' poly scene
+    # 2D sections; ballast library build rate; polyhedron narrow phase; the peers' poly scene; a bonded specimen
     quick_args = {"bench_polygons.py": ["--quick"], "bench_library.py": ["--quick"], "bench_polyhedra.py": [],
-                  "bench_poly.py": ["--n", "100", "--steps", "1000"]}
+                  "bench_poly.py": ["--n", "100", "--steps", "1000"], "bench_bonds.py": ["--steps", "2000"]}
     for script, qargs in quick_args.items():
         subprocess.run([sys.executable, os.path.join(HERE, script)] + (qargs if a.quick else []), cwd=ROOT)
     load1 = load()

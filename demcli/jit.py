@@ -1,13 +1,19 @@
 """The one numba wrapper every kernel uses.
 
-Cache policy: on unless ``DEMCLI_NUMBA_CACHE=0``. Threading layer: OpenMP, set
-explicitly before any parallel kernel compiles (numba's default picks TBB where it
-is installed, which scales poorly for these loops). ``NUMBA_DISABLE_JIT=1`` runs the
-kernels as Python for coverage.
+Cache policy: on unless ``DEMCLI_NUMBA_CACHE=0``, in a folder named after a digest of
+every demcli source that holds compiled code (under ``$NUMBA_CACHE_DIR``, default
+``~/.cache/demcli/numba``). Numba checks only the time stamp of a kernel's own file, so
+a kernel that inlines a helper from another file (the step loop and the contact and
+bond laws) would otherwise keep running the old helper after an edit; with the digest,
+any edit compiles afresh. Threading layer: OpenMP, set explicitly before any parallel
+kernel compiles (numba's default picks TBB where it is installed, which scales poorly
+for these loops). ``NUMBA_DISABLE_JIT=1`` runs the kernels as Python for coverage.
 """
 
+import hashlib
 import math
 import os
+from pathlib import Path
 
 import numba
 
@@ -15,6 +21,28 @@ _CACHE = os.environ.get("DEMCLI_NUMBA_CACHE", "1") != "0"
 
 if os.environ.get("NUMBA_THREADING_LAYER") is None:
     numba.config.THREADING_LAYER = "omp"
+
+
+def kernel_digest():
+    """sha256 (16 hex digits) of the demcli sources that define compiled code."""
+    root = Path(__file__).resolve().parent
+    h = hashlib.sha256()
+    for path in sorted(root.rglob("*.py")):
+        text = path.read_bytes()
+        if b"njit" in text:
+            h.update(path.relative_to(root).as_posix().encode() + b"\0" + text)
+    return h.hexdigest()[:16]
+
+
+def cache_dir():
+    """Where compiled kernels of these sources are cached."""
+    base = os.environ.get("NUMBA_CACHE_DIR") or os.path.join(
+        os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache"), "demcli", "numba")
+    return os.path.join(base, kernel_digest())
+
+
+if _CACHE:
+    numba.config.CACHE_DIR = cache_dir()
 
 
 def njit(*args, parallel=False, inline="never", **kwargs):

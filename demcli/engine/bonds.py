@@ -132,6 +132,17 @@ class BondSet:
         return (self.start, self.j, rstart, rlist, self.model, self.state, self.hist,
                 np.zeros((n, 3)), np.zeros((n, 3)), np.zeros(n))
 
+    def kernel_table(self, dt):
+        """(n_bm, N_BTABLE) model table with the Burgers step coefficients for ``dt`` appended
+        (zero for the other models): what the bond pass reads."""
+        out = np.zeros((len(self.prm), B.N_BTABLE))
+        out[:, :B.N_BPARAMS] = self.prm
+        for m, p in enumerate(self.prm):
+            if p[B.B_KIND] == B.BURGERS:
+                for col, k in ((B.B_COEF_N, B.B_KMN), (B.B_COEF_S, B.B_KMS)):
+                    out[m, col:col + 6] = B.burgers_coefficients(p[k], p[k + 1], p[k + 2], p[k + 3], float(dt))
+        return out
+
     def groups(self):
         """State groups ``bonds`` and ``bond_models``."""
         g = {"i": self.i, "j": self.j.copy(), "model": self.model.copy(), "state": self.state.copy()}

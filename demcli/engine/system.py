@@ -239,6 +239,14 @@ class System(BodySystem):
                 nl[K.NL_ACT][c] = 0
         return n
 
+    def _bond_table(self):
+        """The bond models with their Burgers step coefficients for the current dt (cached)."""
+        key = (self.dt, self.bonds.prm.tobytes())
+        if getattr(self, "_bond_table_key", None) != key:
+            self._bond_table_key = key
+            self._bond_table_cache = self.bonds.kernel_table(self.dt)
+        return self._bond_table_cache
+
     @property
     def bond_state(self):
         return self.bonds.state
@@ -313,7 +321,7 @@ class System(BodySystem):
             w.kind, self.wpoint, w.normal, w.radius, self.wv, w.material, w.control, w.prm,
             self.wforce, self.wkn,
             self.nl, self.skin, self.max_cells,
-            self.esph, self.ebody, self.eacc, self._bond_arrays, self.bonds.prm,
+            self.esph, self.ebody, self.eacc, self._bond_arrays, self._bond_table(),
             int(self.dyn.check_every), float(self.dyn.overlap_limit), float(self.ke_limit),
             self.counters, self.info, self._fresh_lists, self.step, self.prime)
         self._fresh_lists = False

@@ -26,7 +26,8 @@ Models (``B_KIND`` of a model row, PFC's bond models; Potyondy & Cundall 2004):
   replacing the contact while intact: normal compression elastic, F_n = k_n delta for
   delta >= 0; normal tension and shear each a Burgers element (Maxwell spring K_m and
   dashpot C_m in series with a Kelvin spring K_k parallel to a dashpot C_k), advanced by
-  :func:`burgers_update`; optional strengths (N) as for the contact bond.
+  the exact step map of :func:`burgers_coefficients`; optional strengths (N) as for the
+  contact bond.
 
 History of a bond (columns ``H_*`` of ``hist``): the force on i split into its normal
 part (tension element force for Burgers) and shear vector, the twist and bending moments,
@@ -64,6 +65,11 @@ B_CMS = 13
 B_KKS = 14
 B_CKS = 15
 N_BPARAMS = 16
+# the kernel's table appends the Burgers step coefficients for the stage's time step
+# (:func:`burgers_coefficients`, 6 per direction: phi00 phi01 phi10 phi11 g0 g1)
+B_COEF_N = 16  # normal tension
+B_COEF_S = 22  # shear
+N_BTABLE = 28
 
 # columns of the bond history hist[b, :]
 H_FN = 0       # normal force on i [N], compression positive (Burgers: tension element force, >= 0 pulls)
@@ -81,34 +87,80 @@ BROKEN_TENSION = 1
 BROKEN_SHEAR = 2
 
 
-@njit(inline="always")
-def burgers_update(s, uk, du, dt, km, cm, kk, ck):
-    """One step of a Burgers element driven by the displacement increment ``du`` [m].
+@njit
+def burgers_coefficients(km, cm, kk, ck, dt):
+    """Exact one-step map of a Burgers element for a displacement linear in time [SI].
 
-    The element force s [N] (elongation positive) is taken linear in time over the step;
-    under that assumption every part is integrated exactly: the Maxwell spring
-    du_m = ds / K_m, the Maxwell dashpot du_c = dt (s_0 + s_1) / (2 C_m) and the Kelvin
-    element tau u_k' + u_k = s / K_k (tau = C_k / K_k), whose exact solution for a linear
-    force is u_k1 = u_k0 e + s_0 (1 - e) / K_k + ds (1 - g) / K_k with e = exp(-dt / tau)
-    and g = tau (1 - e) / dt. Adding the parts, du = ds [1/K_m + dt/(2 C_m) + (1 - g)/K_k]
-    + dt s_0 / C_m - (1 - e)(u_k0 - s_0 / K_k), is solved for ds: the update is
-    unconditionally stable and exact under constant force (creep) for any dt / tau.
+    State x = (s, u_k): the element force (elongation positive) and the Kelvin displacement.
+    With u = s/K_m + u_c + u_k, C_m u_c' = s and C_k u_k' = s - K_k u_k, a constant
+    displacement rate v gives the linear system x' = A x + b v,
 
-    Returns (s1, uk1, dissipated energy [J]): the work 0.5 (s_0 + s_1) du less the change
-    of the energy stored in the springs, s^2 / (2 K_m) + K_k u_k^2 / 2.
+        A = [[-K_m (1/C_m + 1/C_k), K_m K_k / C_k], [1/C_k, -K_k / C_k]],  b = (K_m, 0),
+
+    whose exact solution over a step is x_1 = Phi x_0 + Gamma du (du = v dt) with
+    Phi = exp(A dt) and Gamma = phi_1(A dt) b, phi_1(z) = (e^z - 1) / z. A has two real
+    negative eigenvalues (trace < 0, determinant K_m K_k / (C_m C_k) > 0, discriminant
+    (a - d)^2 + 4 K_m K_k / C_k^2 > 0), so both matrix functions follow from Sylvester's
+    formula f(A) = [f(l1) (A - l2 I) - f(l2) (A - l1 I)] / (l1 - l2), phi_1 through expm1.
+    C_k = 0 (a Kelvin spring alone): the springs in series, K = K_m K_k / (K_m + K_k), relax
+    through C_m with l = -K / C_m, and u_k = s / K_k.
+
+    Returns (phi00, phi01, phi10, phi11, g0, g1). The step the engine takes is exactly this
+    (the drift moves every body at its mid-step velocity), so the update is exact for any
+    dt / tau and unconditionally stable.
     """
-    if ck > 0.0:
-        r = dt / (ck / kk)
-        e = math.exp(-r)
-        g = (1.0 - e) / r if r > 0.0 else 1.0
+    if ck <= 0.0:
+        ks = km * kk / (km + kk)
+        z = -ks / cm * dt
+        e = math.exp(z)
+        f = math.expm1(z) / z if z != 0.0 else 1.0
+        return e, 0.0, e / kk, 0.0, ks * f, ks * f / kk
+    a = -km * (1.0 / cm + 1.0 / ck)
+    b = km * kk / ck
+    c = 1.0 / ck
+    d = -kk / ck
+    half = 0.5 * (a + d)
+    root = math.sqrt(0.25 * (a - d) ** 2 + b * c)
+    l1 = half + root
+    l2 = half - root
+    e1 = math.exp(l1 * dt)
+    e2 = math.exp(l2 * dt)
+    f1 = math.expm1(l1 * dt) / (l1 * dt) if dt > 0.0 else 1.0
+    f2 = math.expm1(l2 * dt) / (l2 * dt) if dt > 0.0 else 1.0
+    w = l1 - l2
+    # f(A) = p I + q A with q = (f1 - f2) / w and p = (l1 f2 - l2 f1) / w
+    qe = (e1 - e2) / w
+    pe = (l1 * e2 - l2 * e1) / w
+    qf = (f1 - f2) / w
+    pf = (l1 * f2 - l2 * f1) / w
+    return pe + qe * a, qe * b, qe * c, pe + qe * d, (pf + qf * a) * km, qf * c * km
+
+
+@njit(inline="always")
+def burgers_step(s, uk, du, dt, cf, k, km, kk):
+    """One step of a Burgers element with the coefficients cf[k:k+6] of
+    :func:`burgers_coefficients` for this dt; dt = 0 (a step of zero length, the engine's
+    priming pass) takes du as a jump: the dashpots are rigid, s += K_m du.
+
+    Returns (s1, uk1, dissipated energy [J]): the work 0.5 (s_0 + s_1) du less the change of
+    the energy stored in the springs, s^2 / (2 K_m) + K_k u_k^2 / 2.
+    """
+    if dt > 0.0:
+        s1 = cf[k] * s + cf[k + 1] * uk + cf[k + 4] * du
+        uk1 = cf[k + 2] * s + cf[k + 3] * uk + cf[k + 5] * du
     else:
-        e = 0.0
-        g = 0.0
-    ds = (du - dt * s / cm + (1.0 - e) * (uk - s / kk)) / (1.0 / km + 0.5 * dt / cm + (1.0 - g) / kk)
-    s1 = s + ds
-    uk1 = uk * e + (s * (1.0 - e) + ds * (1.0 - g)) / kk
+        s1 = s + km * du
+        uk1 = uk
     stored = (s1 * s1 - s * s) / (2.0 * km) + 0.5 * kk * (uk1 * uk1 - uk * uk)
     return s1, uk1, 0.5 * (s + s1) * du - stored
+
+
+@njit
+def burgers_update(s, uk, du, dt, km, cm, kk, ck):
+    """One step of a Burgers element driven by the displacement increment ``du`` [m] spread
+    evenly over dt (:func:`burgers_coefficients` computed for this one step)."""
+    cf = np.array(burgers_coefficients(km, cm, kk, ck, dt))
+    return burgers_step(s, uk, du, dt, cf, 0, km, kk)
 
 
 @njit(inline="always")
@@ -143,7 +195,7 @@ def bond_law(p, hist, b, delta, nx, ny, nz, vx, vy, vz, wx, wy, wz, ri, rj, dt):
     """Force and moment on i from bond b; updates its history row in place.
 
     Args:
-        p: (N_BPARAMS,) model row; hist: (n_bonds, N_HIST) history.
+        p: (N_BTABLE,) model row with the Burgers coefficients for dt; hist: (n_bonds, N_HIST).
         delta: r_i + r_j - d [m] (negative: a gap); n: unit normal from j to i.
         v: contact-point velocity of i relative to j [m/s]; w: omega_i - omega_j [rad/s].
         ri, rj: radii [m]; dt: time step [s].
@@ -217,8 +269,8 @@ def bond_law(p, hist, b, delta, nx, ny, nz, vx, vy, vz, wx, wy, wz, ri, rj, dt):
             hist[b, H_FN] = 0.0
             hist[b, H_UKN] = 0.0
         else:
-            t1, uk1, ed = burgers_update(hist[b, H_FN], hist[b, H_UKN], sep - hist[b, H_SEP], dt,
-                                         p[B_KMN], p[B_CMN], p[B_KKN], p[B_CKN])
+            t1, uk1, ed = burgers_step(hist[b, H_FN], hist[b, H_UKN], sep - hist[b, H_SEP], dt, p, B_COEF_N,
+                                       p[B_KMN], p[B_KKN])
             hist[b, H_FN] = t1
             hist[b, H_UKN] = uk1
             e_diss += ed
@@ -226,9 +278,9 @@ def bond_law(p, hist, b, delta, nx, ny, nz, vx, vy, vz, wx, wy, wz, ri, rj, dt):
         hist[b, H_SEP] = sep
         # shear: the element's elongation is i's tangential displacement, its force -F_s
         kx, ky, kz = _rotate_vec(hist, b, H_UKS, nx, ny, nz)
-        ex, kx, ed0 = burgers_update(-sx, kx, vtx * dt, dt, p[B_KMS], p[B_CMS], p[B_KKS], p[B_CKS])
-        ey, ky, ed1 = burgers_update(-sy, ky, vty * dt, dt, p[B_KMS], p[B_CMS], p[B_KKS], p[B_CKS])
-        ez, kz, ed2 = burgers_update(-sz, kz, vtz * dt, dt, p[B_KMS], p[B_CMS], p[B_KKS], p[B_CKS])
+        ex, kx, ed0 = burgers_step(-sx, kx, vtx * dt, dt, p, B_COEF_S, p[B_KMS], p[B_KKS])
+        ey, ky, ed1 = burgers_step(-sy, ky, vty * dt, dt, p, B_COEF_S, p[B_KMS], p[B_KKS])
+        ez, kz, ed2 = burgers_step(-sz, kz, vtz * dt, dt, p, B_COEF_S, p[B_KMS], p[B_KKS])
         e_diss += ed0 + ed1 + ed2
         sx = -ex
         sy = -ey
