@@ -56,6 +56,30 @@ def face_areas(shapes):
     return 0.5 * np.linalg.norm(s, axis=1)
 
 
+def rotational_compliance(vertices, vertex_start, shape, inertia):
+    """Largest (p x n) . I^-1 (p x n) of each body over its points p and unit vectors n [1/kg].
+
+    vertices: (n_v, 3) template vertices [m] in the principal frame (centroid at the
+    origin); vertex_start: (n_shape + 1,) CSR offsets into them; shape: (n,) template of
+    each body; inertia: (n, 3) principal moments [kg m^2]. With [p]x the cross-product
+    matrix (p x n = [p]x n), the maximum over n for one p is the largest eigenvalue of
+    [p]x^T I^-1 [p]x; over p it is reached at a vertex, the function being a maximum of
+    convex quadratics of p. See :meth:`PolySystem.critical_dt`.
+    """
+    counts = np.diff(vertex_start)[shape]
+    body = np.repeat(np.arange(len(shape)), counts)
+    rows = np.arange(int(counts.sum())) - np.repeat(np.cumsum(counts) - counts, counts) + np.repeat(
+        vertex_start[shape], counts)
+    p = vertices[rows]
+    z = np.zeros(len(p))
+    px = np.stack([np.stack([z, -p[:, 2], p[:, 1]], 1), np.stack([p[:, 2], z, -p[:, 0]], 1),
+                   np.stack([-p[:, 1], p[:, 0], z], 1)], 1)   # [p]x: [p]x n = p x n
+    m = np.einsum("kji,kj,kjl->kil", px, 1.0 / inertia[body], px)
+    out = np.zeros(len(shape))
+    np.maximum.at(out, body, np.linalg.eigvalsh(m)[:, -1])
+    return out
+
+
 def poly_pair_table(materials, model):
     """(n_m, n_m, N_QPARAMS) table: k_n = 4 E / (3 sqrt(pi)) with E = 2 E1 E2 / (E1 + E2),
     friction (geometric mean) and the dashpot damping ratio from restitution (geometric
@@ -349,18 +373,38 @@ class PolySystem(BodySystem):
         self.adamp[A_ALPHA] = float(value)
 
     def critical_dt(self):
-        """Critical time step of this scene [s].
+        """Critical time step of this scene [s]: 2 / omega_max over the mobile bodies.
 
-        2 / omega_max with omega^2 = 2 K / m for every mobile body: two equal bodies
-        (m* = m/2) pressed together through the stiffest contact the body can make, a
-        whole face on a face, K = k_n sqrt(A_f) with A_f the body's largest face area
-        (the volumetric law's stiffness for a flat overlap of area A is k_n sqrt(A)).
-        Flat face-face contacts are the common ones in a settled polyhedral bed; the
-        "typical contact" of area (0.1 r)^2 would be ~10 times softer and overestimate
-        the step ~3 times. Other modes stay below this one: rocking on a face contact
-        has omega^2 = K s^2 / (12 I) <= K / m (cube, plate, needle); a corner contact
-        at arm r has omega^2 = K_c (1/m + r^2/I) <= ~7 K_c / m, and K_c = k_n sqrt(A_c)
-        with A_c < A_f / 12 unless the overlap is a tenth of the body deep.
+        A normal force F n at the point p of a body (p from its centroid, m) accelerates
+        that point along n by F (1/m + (p x n) . I^-1 (p x n)): n . (F n / m +
+        (I^-1 (p x F n)) x p), rotation included. A contact of normal stiffness K [N/m]
+        between two bodies is thus a spring on the effective mass m_eff,
+        1/m_eff = sum over the two bodies of 1/m + (p x n) . I^-1 (p x n) [1/kg], and
+        omega^2 = K / m_eff. Each body is bounded with itself as the partner (two equal
+        bodies):
+
+            omega^2 = 2 K_max (1/m + c_rot)
+
+        * K_max = k_n sqrt(A_f) [N/m]: the stiffest contact the body can make, a whole
+          face on a face (the volumetric law's stiffness for a flat overlap of area A is
+          k_n sqrt(A)); A_f the body's largest face area, k_n that of its stiffest
+          partner material, walls included.
+        * c_rot [1/kg]: the largest (p x n) . I^-1 (p x n) over the body's points and
+          directions (:func:`rotational_compliance`). A sliver touched at an edge,
+          r = t / sqrt 2 from its axis, I = m t^2 / 6 about it, moves like a quarter of
+          its mass (3/m); over its whole surface c_rot = 6/m. With the translational
+          mass alone (c_rot = 0) a sliver struck between two plates went unstable at
+          dt = 0.3 x that step with the normal dashpot and local damping
+          (docs/stability.md).
+
+        The bound pairs the stiffest contact (a whole face) with the most compliant
+        point (a vertex), which no single contact is: a whole face's overlap has its
+        centroid near the face's centre. For a cube, a square patch of side s a in a
+        corner of a face gives omega^2 = 2 k_n sqrt(A_f) s (1 + 3 (1 - s)^2) / m, never
+        above the face-on value (s = 1), while the bound is 5.5 times it (dt / 2.3); a
+        40 x 40 x 2 mm plate and a 40 x 2 x 2 mm sliver get dt / 2.6 and random ballast
+        stones dt / 2.3 .. 3.4. The margin is what covers several contacts on one body
+        acting in a shared mode (the pinched sliver) and the damping.
         """
         from demcli.kernels.poly_step import Q_KN
 
@@ -374,7 +418,9 @@ class PolySystem(BodySystem):
         # stiffest partner material of each body (walls included)
         mats = np.unique(np.concatenate([self.bmat, np.asarray(self.walls.material, np.int64)]))
         knb = kn[self.bmat][:, mats].max(axis=1)
-        w2 = 2.0 * knb * np.sqrt(amax) / self.mass
+        crot = rotational_compliance(self.shapes[1], self.shapes[0], self.shape, self.inert)
+        crot[(self.bflags & K.FIX_ROTATION) != 0] = 0.0
+        w2 = 2.0 * knb * np.sqrt(amax) * (1.0 / self.mass + crot)
         mobile = (self.bflags & K.FIX_TRANSLATION) == 0
         if not mobile.any():
             return math.inf

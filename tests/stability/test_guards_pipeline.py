@@ -175,7 +175,8 @@ def test_last_good_state_equals_an_undisturbed_run_to_that_step(tmp_path, smoke_
 
 
 def test_unstable_time_step_stops_polyhedra_with_a_diagnosis(tmp_path):
-    # Given: the polyhedral scene with a time step 30 x the critical one (1.7e-4 s; explicitly allowed)
+    # Given: the polyhedral scene with a time step of 5e-3 s, 70 x the critical one (7.1e-5 s;
+    # explicitly allowed)
     case, _, _, _ = _polyhedra_case(tmp_path)
     over = ["stages.settle.time.dt=5e-3", "stages.settle.safety.allow_unstable_dt=true"]
     # When: it runs
@@ -183,7 +184,7 @@ def test_unstable_time_step_stops_polyhedra_with_a_diagnosis(tmp_path):
         run_case(case, out=tmp_path, quiet=True, only="settle", overrides=over)
     text = str(err.value)
     # Then: a guard stops it (whichever trips first; measured: the runaway-energy guard at step 4) and
-    # the diagnosis says the step is far above the critical one (measured "30.1 of the critical"); the
+    # the diagnosis says the step is far above the critical one (measured "70.5 of the critical"); the
     # last good state is the start (step 0), valid and finite
     assert "stopped at step" in text and "of the critical" in text
     ratio = float(text.split("time step ")[1].split(" is ")[1].split(" of the critical")[0])
