@@ -514,9 +514,7 @@ class _Snapshots:
 
     def truncate(self, time):
         if self.walls is None:
-            self.bodies.spheres.truncate(time)
-            self.bodies.walls.truncate(time)
-            self.bodies.count = len(self.bodies.spheres)
+            self.bodies.truncate(time)
         else:
             self.bodies.series.truncate(time)
             self.walls.truncate(time)

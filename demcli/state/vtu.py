@@ -5,8 +5,11 @@ Spheres become vertex cells at their world centres with point data ``radius``,
 ParaView apply *Glyph* (Sphere, scale by ``diameter``, scale factor 1). Walls become a
 quad surface: planes clipped to their ``extent`` box, cylinders as a 48-sided tube
 spanning the extent along the axis, with cell data ``wall``, ``kind``, ``control``,
-``velocity`` and ``force``. Files are binary zlib-compressed VTU written by meshio,
-atomically; the ``.pvd`` collection is rewritten atomically after each snapshot.
+``velocity`` and ``force``. Bonds become line cells between the centres of the two
+spheres, with cell data ``state`` (0 intact, 1 broken in tension, 2 in shear), ``model``,
+``force_n`` (compression positive) and ``force_s`` (magnitude); in ParaView apply *Extract
+Surface* then *Tube*, or colour the lines. Files are binary zlib-compressed VTU written by meshio, atomically;
+the ``.pvd`` collection is rewritten atomically after each snapshot.
 """
 
 from __future__ import annotations
@@ -53,6 +56,23 @@ def sphere_mesh(state) -> meshio.Mesh:
 def write_spheres_vtu(path, state) -> Path:
     """Write the spheres of ``state`` as a binary VTU (atomically); returns the path."""
     return _write_mesh(path, sphere_mesh(state))
+
+
+def bond_mesh(state) -> meshio.Mesh:
+    """The bonds of a State as line cells between sphere centres (see module doc)."""
+    i = np.asarray(state["bonds/i"], dtype=np.int64)
+    j = np.asarray(state["bonds/j"], dtype=np.int64)
+    fs = np.asarray(state["bonds/force_s"], dtype=np.float64).reshape(-1, 3)
+    cell_data = {"state": [np.asarray(state["bonds/state"], dtype=np.int64)],
+                 "model": [np.asarray(state["bonds/model"], dtype=np.int64)],
+                 "force_n": [np.asarray(state["bonds/force_n"], dtype=np.float64)],
+                 "force_s": [np.linalg.norm(fs, axis=1)]}
+    return meshio.Mesh(state.sphere_centres(), [("line", np.stack([i, j], axis=1))], cell_data=cell_data)
+
+
+def write_bonds_vtu(path, state) -> Path:
+    """Write the bonds of ``state`` as binary VTU lines (atomically); returns the path."""
+    return _write_mesh(path, bond_mesh(state))
 
 
 def _basis(n):
@@ -193,6 +213,7 @@ class Snapshots:
         self.folder = Path(folder)
         self.spheres = PvdSeries(self.folder / "spheres.pvd", resume=resume)
         self.walls = PvdSeries(self.folder / "walls.pvd", resume=resume)
+        self.bonds = PvdSeries(self.folder / "bonds.pvd", resume=resume)
         self.count = len(self.spheres)
 
     def write(self, state) -> list[Path]:
@@ -202,8 +223,18 @@ class Snapshots:
         if "walls/kind" in state and len(state["walls/kind"]):
             out.append(write_walls_vtu(self.folder / f"walls_{self.count:06d}.vtu", state))
             self.walls.add(time, out[-1])
+        if "bonds/i" in state and len(state["bonds/i"]):
+            out.append(write_bonds_vtu(self.folder / f"bonds_{self.count:06d}.vtu", state))
+            self.bonds.add(time, out[-1])
         self.count += 1
         return out
 
+    def truncate(self, time: float) -> None:
+        """Drop the entries after ``time`` from every series (a resumed stage)."""
+        for series in (self.spheres, self.walls, self.bonds):
+            series.truncate(time)
+        self.count = len(self.spheres)
 
-__all__ = ["PvdSeries", "Snapshots", "sphere_mesh", "wall_mesh", "write_spheres_vtu", "write_walls_vtu"]
+
+__all__ = ["PvdSeries", "Snapshots", "bond_mesh", "sphere_mesh", "wall_mesh", "write_bonds_vtu", "write_spheres_vtu",
+           "write_walls_vtu"]

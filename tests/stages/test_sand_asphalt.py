@@ -89,6 +89,14 @@ def test_uniaxial_creep_holds_the_stress_and_creeps(uniaxial):
     assert np.all(st["bonds/state"] == INTACT)
     assert (uniaxial / "records" / "creep_creep.png").exists()
     assert (uniaxial / "records" / "creep_creep_dilation.png").exists()
+    # and the snapshots hold the bond network for ParaView: one line per bond between the centres
+    import meshio
+
+    mesh = meshio.read(sorted((uniaxial / "creep").glob("bonds_*.vtu"))[-1])
+    assert mesh.cells[0].type == "line" and len(mesh.cells[0].data) == len(st["bonds/i"])
+    assert np.array_equal(np.sort(mesh.cells[0].data, axis=1), np.c_[st["bonds/i"], st["bonds/j"]])
+    assert np.allclose(mesh.cell_data["force_n"][0], st["bonds/force_n"])
+    assert (uniaxial / "creep" / "bonds.pvd").exists()
 
 
 def test_triaxial_creep_confines_through_the_membrane(triaxial):
