@@ -196,12 +196,13 @@ def run_prepare(ctx, cfg, state_in):
         return done
 
     def measures():
+        """(isotropic stress [Pa], solid fraction, coordination: contacts and bonds per sphere)."""
         p = float(np.trace(system.stress(vcyl))) / 3.0
-        npp, _ = system.contact_count()
-        return p, float(v1 * np.sum(system.rad ** 3) / vcyl), 2.0 * npp / n
+        return p, float(v1 * np.sum(system.rad ** 3) / vcyl), float(system.contacts_per_sphere().mean())
 
-    def record(phase, _steps):
+    def record(phase, _steps, stress=None):
         p, phi, z = measures()
+        p = p if stress is None else stress
         table.append({"phase": PHASES.index(phase) + 1, "radius_factor": float(system.rad.mean()) / r,
                       "solid_fraction": phi, "isotropic_stress": p, "coordination": z,
                       "unbalanced": _unbalanced(system), "steps": system.step})
@@ -240,7 +241,7 @@ def run_prepare(ctx, cfg, state_in):
     nb = system.bond_touching(cfg.bonds.gap * r)
     system.v[:] = 0.0
     system.w[:] = 0.0
-    record("bonded", 0)
+    record("bonded", 0, stress=p)  # the bonds' forces start at the next step: the stress is the one bonded
     ctx.log(f"bonded {nb} contacts ({2.0 * nb / n:.3f} per sphere); cylinder wall removed")
     st = ctx.state_from(system, plan)
     for g in ("walls", "wall_contacts"):
