@@ -46,3 +46,29 @@ def h5_differences():
 def h5_datasets():
     """``h5_datasets(path)``: every dataset of a state file as {name: array}."""
     return _h5_datasets
+
+
+@pytest.fixture
+def interrupt_and_resume(monkeypatch):
+    """``interrupt_and_resume(system_class, step, case, out, checkpoint)``: run ``case`` into
+    ``out`` with Ctrl-C raised once a ``system_class`` reaches ``step``, check that the
+    interrupted stage left ``checkpoint`` (a file name in ``out``), then resume it."""
+    from demcli import run_case
+    from demcli.errors import StageError
+
+    def run(system_class, step, case, out, checkpoint):
+        real = system_class.advance
+
+        def interrupted(self, n):
+            if self.step >= step:
+                raise KeyboardInterrupt
+            return real(self, n)
+
+        monkeypatch.setattr(system_class, "advance", interrupted)
+        with pytest.raises(StageError, match="interrupted"):
+            run_case(case, out=out, quiet=True)
+        assert (Path(out) / checkpoint).exists()
+        monkeypatch.setattr(system_class, "advance", real)
+        run_case(case, out=out, quiet=True, resume=True)
+
+    return run

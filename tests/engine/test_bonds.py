@@ -41,6 +41,14 @@ def creep_exact(t, force, km=KM, cm=CM, kk=KK, ck=CK):
     return force / km + force * t / cm + force / kk * (1.0 - np.exp(-t * kk / ck))
 
 
+def _laplace(km, cm, kk, ck):
+    """(a2, b1, b2, p1, p2) of the Burgers relaxation in Laplace form (see relaxation_exact)."""
+    a1 = ck / kk + cm * (1.0 / kk + 1.0 / km)
+    a2 = ck * cm / (kk * km)
+    disc = math.sqrt(a1 * a1 - 4.0 * a2)
+    return a2, cm, ck * cm / kk, (-a1 + disc) / (2.0 * a2), (-a1 - disc) / (2.0 * a2)
+
+
 def relaxation_exact(t, u0, km=KM, cm=CM, kk=KK, ck=CK):
     """Burgers relaxation under a displacement u0 held from t = 0 (PFC's Burgers model).
 
@@ -51,12 +59,7 @@ def relaxation_exact(t, u0, km=KM, cm=CM, kk=KK, ck=CK):
     s(t) = u0 / a2 [(b1 + b2 p1) e^{p1 t} - (b1 + b2 p2) e^{p2 t}] / (p1 - p2);
     s(0) = u0 b2 / a2 = K_m u0 (checked in the test).
     """
-    a1 = ck / kk + cm * (1.0 / kk + 1.0 / km)
-    a2 = ck * cm / (kk * km)
-    b1, b2 = cm, ck * cm / kk
-    disc = math.sqrt(a1 * a1 - 4.0 * a2)
-    p1 = (-a1 + disc) / (2.0 * a2)
-    p2 = (-a1 - disc) / (2.0 * a2)
+    a2, b1, b2, p1, p2 = _laplace(km, cm, kk, ck)
     return u0 / a2 * ((b1 + b2 * p1) * np.exp(p1 * t) - (b1 + b2 * p2) * np.exp(p2 * t)) / (p1 - p2)
 
 
@@ -64,12 +67,7 @@ def ramp_exact(t, v, km=KM, cm=CM, kk=KK, ck=CK):
     """Burgers force under a displacement u = v t from rest: v times the integral of the
     relaxation modulus (relaxation_exact with u0 = 1), each e^{p t} integrating to
     (e^{p t} - 1) / p."""
-    a1 = ck / kk + cm * (1.0 / kk + 1.0 / km)
-    a2 = ck * cm / (kk * km)
-    b1, b2 = cm, ck * cm / kk
-    disc = math.sqrt(a1 * a1 - 4.0 * a2)
-    p1 = (-a1 + disc) / (2.0 * a2)
-    p2 = (-a1 - disc) / (2.0 * a2)
+    a2, b1, b2, p1, p2 = _laplace(km, cm, kk, ck)
     return v / a2 * ((b1 + b2 * p1) * np.expm1(p1 * t) / p1 - (b1 + b2 * p2) * np.expm1(p2 * t) / p2) / (p1 - p2)
 
 

@@ -197,31 +197,17 @@ def test_compare_overlays_the_runs_records(chain, tmp_path):
     assert bad.exit_code == 2 and "not a run folder" in bad.output
 
 
-def test_interrupted_sleeper_stage_resumes_bit_identically(chain, tmp_path, monkeypatch, h5_differences):
+def test_interrupted_sleeper_stage_resumes_bit_identically(chain, tmp_path, h5_differences, interrupt_and_resume):
     import shutil
 
-    from demcli.engine import poly_system
-    from demcli.errors import StageError
+    from demcli.engine.poly_system import PolySystem
 
     # Given: the smoke chain up to the vibrated bed, and its sleeper stage interrupted (Ctrl-C)
-    # during the load cycle (shoulders filled, sleeper and shoulder particles moving)
+    # during the load cycle (shoulders filled, sleeper and shoulder particles moving); when it
+    # is resumed
     for f in chain.iterdir():
         if f.name[:2] in ("00", "01", "02", "03", "04"):
             shutil.copy(f, tmp_path / f.name)
-    real = poly_system.PolySystem.advance
-
-    def interrupted(self, n):
-        if self.step >= 12000:
-            raise KeyboardInterrupt
-        return real(self, n)
-
-    monkeypatch.setattr(poly_system.PolySystem, "advance", interrupted)
-    with pytest.raises(StageError, match="interrupted"):
-        run_case(SMOKE, out=tmp_path, quiet=True)
-    assert (tmp_path / "05-sleeper.ckpt.h5").exists()
-    # When: it is resumed
-    monkeypatch.setattr(poly_system.PolySystem, "advance", real)
-    run_case(SMOKE, out=tmp_path, quiet=True, resume=True)
-
+    interrupt_and_resume(PolySystem, 12000, SMOKE, tmp_path, "05-sleeper.ckpt.h5")
     # Then: the sleeper state equals the uninterrupted run's, dataset for dataset
     assert h5_differences(chain / "05-sleeper.h5", tmp_path / "05-sleeper.h5") == []

@@ -137,31 +137,16 @@ def test_bad_input_exits_2_with_the_rule(tmp_path, override, message):
     assert message in res.output and "Traceback" not in res.output
 
 
-def test_interrupted_triaxial_creep_resumes_bit_identically(triaxial, tmp_path, monkeypatch, h5_differences):
+def test_interrupted_triaxial_creep_resumes_bit_identically(triaxial, tmp_path, h5_differences,
+                                                             interrupt_and_resume):
     import shutil
 
-    from demcli.engine import system as system_mod
-    from demcli.errors import StageError
+    from demcli.engine.system import System
 
     # Given: the prepared specimen, and its triaxial creep interrupted (Ctrl-C) while the membrane
-    # and the platen move and the Burgers elements creep
+    # and the platen move and the Burgers elements creep; when it is resumed
     shutil.copy(triaxial / "00-prepare.h5", tmp_path / "00-prepare.h5")
-    real = system_mod.System.advance
-
-    def interrupted(self, n):
-        if self.step >= 5000:
-            raise KeyboardInterrupt
-        return real(self, n)
-
-    monkeypatch.setattr(system_mod.System, "advance", interrupted)
-    case = SMOKE / "sand_asphalt_triaxial.yaml"
-    with pytest.raises(StageError, match="interrupted"):
-        run_case(case, out=tmp_path, quiet=True)
-    assert (tmp_path / "01-creep.ckpt.h5").exists()
-    # When: it is resumed
-    monkeypatch.setattr(system_mod.System, "advance", real)
-    run_case(case, out=tmp_path, quiet=True, resume=True)
-
+    interrupt_and_resume(System, 5000, SMOKE / "sand_asphalt_triaxial.yaml", tmp_path, "01-creep.ckpt.h5")
     # Then: the creep state equals the uninterrupted run's, dataset for dataset
     assert h5_differences(triaxial / "01-creep.h5", tmp_path / "01-creep.h5") == []
 
