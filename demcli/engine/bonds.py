@@ -171,10 +171,12 @@ class BondSet:
                 self.prm = np.vstack([self.prm, row[None, :]])
                 self.materials = np.vstack([self.materials, np.array(pair, np.int64)[None, :]])
 
-    def bond_touching(self, xs, rad, smat, sbody, gap):
+    def bond_touching(self, xs, rad, smat, sbody, gap, fraction=1.0, rng=None):
         """Bond every pair of spheres of different bodies whose surfaces are closer than
         ``gap`` [m] and whose material pair has a model; pairs already bonded (intact or
-        broken) stay as they are. Returns the number of new bonds."""
+        broken) stay as they are. ``fraction`` < 1 bonds only that share of them, drawn
+        with ``rng`` (a numpy Generator); the others stay ordinary contacts (the seed-003
+        variant with frictional contacts). Returns the number of new bonds."""
         from demcli.kernels.neighbors import build_pairs
 
         start, pi, pj = build_pairs(xs, rad, sbody, float(gap), max(64, 8 * len(rad)))
@@ -188,6 +190,8 @@ class BondSet:
         old_i = self.i
         have = set(zip(old_i.tolist(), self.j.tolist()))
         new = np.array([k for k in np.nonzero(ok)[0] if (int(pi[k]), int(pj[k])) not in have], np.int64)
+        if fraction < 1.0:
+            new = np.sort(rng.permutation(new)[:int(round(fraction * len(new)))])
         if len(new) == 0:
             return 0
         hist = np.zeros((len(new), B.N_HIST))

@@ -12,7 +12,8 @@
    over the cylinder volume) is below the target (the seed: 1 kPa), cycling between cuts;
 5. spheres with fewer than ``grow.below`` contacts grown by ``grow.factor`` (the seed:
    fewer than 4 contacts, 1 %), and cycling again;
-6. every contact bonded with the case's bond models (Burgers in the seed), and the
+6. every contact bonded with the case's bond models (Burgers in the seed), or a random
+   share ``bonds.fraction`` of them (the seed's variant with frictional contacts), and the
    cylinder wall removed: the state holds the spheres and the bonds, no walls.
 
 Records ``prepare`` (one row per phase and cut: radius factor, solid fraction, isotropic
@@ -82,8 +83,11 @@ PREPARE_FIELDS = {
     "dt_factor": Float(min=0, max=1, min_inclusive=False, default=0.2),
     "mass_scale": Float(min=1, default=1.0, doc="mass scaling while packing (power of 2; quasi-static)"),
     "bonds": Section({"models": dem.BOND_MODELS,
-                      "gap": Float(min=0, default=1e-6, doc="pairs closer than gap x radius count as touching")},
-                     doc="bond models by material pair; every contact is bonded at the end"),
+                      "gap": Float(min=0, default=1e-6, doc="pairs closer than gap x radius count as touching"),
+                      "fraction": Float(min=0, max=1, default=1.0,
+                                        doc="share of the contacts bonded, drawn at random (the seed's variant "
+                                            "with frictional contacts: the others keep the creep stage's law)")},
+                     doc="bond models by material pair; every contact (or a random share) is bonded at the end"),
 }
 
 PHASES = ("expand", "equilibrium", "reduce", "grow", "bonded")
@@ -238,7 +242,7 @@ def run_prepare(ctx, cfg, state_in):
             f"({100 * few.mean():.3g} %) with < {cfg.grow.below} contacts grown by {cfg.grow.factor:g}; "
             f"solid fraction {phi:.4f}, coordination {z:.3f}, isotropic stress {p:.4g} Pa")
     dem.set_bond_models(ctx, cfg.bonds, system)
-    nb = system.bond_touching(cfg.bonds.gap * r)
+    nb = system.bond_touching(cfg.bonds.gap * r, cfg.bonds.fraction, ctx.rng)
     system.v[:] = 0.0
     system.w[:] = 0.0
     record("bonded", 0, stress=p)  # the bonds' forces start at the next step: the stress is the one bonded
@@ -399,8 +403,7 @@ def run_creep(ctx, cfg, state_in):
         state.groups["creep_result"] = {"sigma_1": np.float64(s1), "sigma_3": np.float64(s3),
                                         "dilation_gradient": np.float64(slope),
                                         "final_axial_strain": np.float64(rows["axial_strain"][-1])}
-        for key in ("bonded_specimen",):
-            state.groups[key] = dict(state_in.groups[key])
+        state.groups["bonded_specimen"] = dict(state_in.groups["bonded_specimen"])
         ctx_.log(f"creep at sigma_1 {s1 / 1e3:.4g} kPa, sigma_3 {s3 / 1e3:.4g} kPa: axial strain "
                  f"{rows['axial_strain'][-1]:.4g} after {cfg.duration:g} s; dilation gradient {slope:.3g} "
                  f"between e_d = {cfg.dilation_window[0]:g} and {cfg.dilation_window[1]:g}")

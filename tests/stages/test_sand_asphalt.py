@@ -158,3 +158,22 @@ def test_bonded_chain_is_bit_identical_for_1_and_2_threads(tmp_path, h5_differen
     # Then: every dataset of both states is bit-identical
     for name in ("00-prepare.h5", "01-creep.h5"):
         assert h5_differences(tmp_path / "1" / name, tmp_path / "2" / name) == [], name
+
+
+def test_a_share_of_the_contacts_bonded_leaves_the_others_as_contacts(uniaxial, tmp_path):
+    # Given: the same specimen prepared with bonds.fraction = 0.6 (the seed's variant with
+    # frictional contacts; same seed, so the same packing up to the bonding)
+    run_case(SMOKE / "sand_asphalt_uniaxial.yaml", out=tmp_path, quiet=True, only="prepare",
+             overrides=["stages.prepare.bonds.fraction=0.6"])
+    full = read_state(uniaxial / "00-prepare.h5")
+    part = read_state(tmp_path / "00-prepare.h5")
+    assert np.array_equal(part["bodies/x"], full["bodies/x"])
+    every = set(zip(full["bonds/i"].tolist(), full["bonds/j"].tolist()))
+    bonded = set(zip(part["bonds/i"].tolist(), part["bonds/j"].tolist()))
+    # Then: 60 % of the touching pairs are bonds (rounded), drawn from them
+    assert len(bonded) == round(0.6 * len(every)) and bonded < every
+    # and every touching pair left unbonded is an ordinary contact
+    x, r = part["bodies/x"], part["spheres/radius"]
+    overlapping = {(i, j) for i, j in every - bonded if np.linalg.norm(x[i] - x[j]) < r[i] + r[j]}
+    contacts = set(zip(part["contacts/i"].tolist(), part["contacts/j"].tolist()))
+    assert overlapping and overlapping <= contacts and not contacts & bonded
