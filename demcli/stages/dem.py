@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from demcli.config.schema import Bool, Float, Int, List, Map, Optional, Section, Str, Tagged, Vector
-from demcli.errors import InputError, StageError
+from demcli.errors import InputError, StageError, StateError
 from demcli.stages.base import StageType, register_stage
 from demcli.state.fields import Field, register, register_group
 
@@ -301,7 +301,7 @@ def phase_models(ctx, state_groups):
     st.groups.update(state_groups)
     try:
         table = phase_table(st)
-    except Exception as e:  # a missing or invalid table is bad input for this stage
+    except StateError as e:  # a missing or invalid table is bad input for this stage
         raise InputError(f"stage {ctx.name}: bonds.from_phases: {e}") from None
     pm = phase_materials(ctx, state_groups)
     names = list(ctx.case.materials)

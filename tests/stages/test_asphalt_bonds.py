@@ -82,3 +82,17 @@ def test_every_touching_pair_of_bonded_phases_is_bonded(bonded):
     bi, bj = after["bonds/i"], after["bonds/j"]
     assert not contacts & set(zip(bi[cb & intact].tolist(), bj[cb & intact].tolist()))
     assert contacts & set(zip(bi[~cb].tolist(), bj[~cb].tolist()))
+
+
+def test_bonds_from_phases_without_a_phase_table_is_bad_input(tmp_path):
+    from click.testing import CliRunner
+
+    from demcli.cli import cli
+
+    # Given: the beads smoke case (no mastic stage, no phase table) asked for bonds by phase pair
+    res = CliRunner().invoke(cli, ["run", str(ROOT / "cases" / "smoke" / "beads.yaml"), "--out", str(tmp_path),
+                                   "--quiet", "--set", "stages.settle.bonds.from_phases=true",
+                                   "--set", "stages.settle.contact.law=linear", "--set", "stages.settle.contact.kn=1e4"])
+    # Then: exit 2 with the stage, the key and the reason, no traceback
+    assert res.exit_code == 2, res.output
+    assert "bonds.from_phases" in res.output and "phases" in res.output and "Traceback" not in res.output
