@@ -39,6 +39,19 @@ class Walls:
     def __len__(self):
         return len(self.kind)
 
+    @classmethod
+    def fixed_planes(cls, points, normals, material=0):
+        """Fixed plane walls (kind 0) through ``points`` [m] with ``normals`` into the domain
+        (normalized here), all of ``material``; drawn over a 2 m box."""
+        p = np.asarray(points, float).reshape(-1, 3)
+        n = np.asarray(normals, float).reshape(-1, 3)
+        n = n / np.linalg.norm(n, axis=1)[:, None]
+        k = len(p)
+        return cls(name=[f"w{i}" for i in range(k)], kind=np.zeros(k, np.int8), point=p, normal=n,
+                   radius=np.zeros(k), v=np.zeros((k, 3)), material=np.full(k, material, np.int64),
+                   control=np.zeros(k, np.int8), prm=np.zeros((k, N_WPARAMS)),
+                   extent=np.tile([-1.0, -1.0, -1.0, 1.0, 1.0, 1.0], (k, 1)))
+
 
 @dataclass(frozen=True)
 class Dynamics:

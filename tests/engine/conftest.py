@@ -12,7 +12,6 @@ import pytest
 from demcli.engine.materials import ContactModel, Material
 from demcli.engine.plan import make_plan
 from demcli.engine.system import Dynamics, System, Walls
-from demcli.kernels.walls import N_WPARAMS
 
 NO_GRAVITY = (0.0, 0.0, 0.0)
 
@@ -23,14 +22,7 @@ def sphere_mass(radius, density):
 
 def plane_walls(points, normals, material=0):
     """Fixed plane walls (kind 0) through ``points`` with unit ``normals`` into the domain."""
-    p = np.asarray(points, float).reshape(-1, 3)
-    n = np.asarray(normals, float).reshape(-1, 3)
-    n = n / np.linalg.norm(n, axis=1)[:, None]
-    k = len(p)
-    return Walls(name=[f"w{i}" for i in range(k)], kind=np.zeros(k, np.int8), point=p, normal=n,
-                 radius=np.zeros(k), v=np.zeros((k, 3)), material=np.full(k, material, np.int64),
-                 control=np.zeros(k, np.int8), prm=np.zeros((k, N_WPARAMS)),
-                 extent=np.tile([-1.0, -1.0, -1.0, 1.0, 1.0, 1.0], (k, 1)))
+    return Walls.fixed_planes(points, normals, material)
 
 
 def sphere_system(x, v, radius, materials, model, effects=(), walls=None, omega=None, gravity=NO_GRAVITY,

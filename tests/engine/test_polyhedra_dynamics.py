@@ -19,7 +19,6 @@ from demcli.engine.poly_system import PolySystem, polyhedra_groups
 from demcli.engine.system import Dynamics, Walls
 from demcli.geometry import convex_hull
 from demcli.kernels import layout as K
-from demcli.kernels.walls import N_WPARAMS
 
 G = 9.81
 RHO = 2600.0
@@ -38,14 +37,7 @@ def random_hull(rng, size, n=24):
 
 
 def planes(points, normals):
-    p = np.asarray(points, float).reshape(-1, 3)
-    n = np.asarray(normals, float).reshape(-1, 3)
-    n = n / np.linalg.norm(n, axis=1)[:, None]
-    k = len(p)
-    return Walls(name=[f"w{i}" for i in range(k)], kind=np.zeros(k, np.int8), point=p, normal=n,
-                 radius=np.zeros(k), v=np.zeros((k, 3)), material=np.zeros(k, np.int64),
-                 control=np.zeros(k, np.int8), prm=np.zeros((k, N_WPARAMS)),
-                 extent=np.tile([-1.0, -1.0, -1.0, 1.0, 1.0, 1.0], (k, 1)))
+    return Walls.fixed_planes(points, normals)
 
 
 def system(polys, x=None, q=None, v=None, omega=None, effects=(), walls=None, gravity=(0.0, 0.0, -G),
