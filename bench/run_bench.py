@@ -1,7 +1,8 @@
-"""`make bench`: demcli's throughput next to the peer DEM codes, on identical sphere scenes.
+"""`make bench`: demcli's throughput next to the peer DEM codes, on identical scenes.
 
 Runs, alternating (demcli, peer, demcli, peer, ...; all entries once, then all a second
-time), the peers' sphere scenes (default: dense, N = 10000, 20000 steps, dt = 1e-6 s):
+time), the peers' scenes (default: the sphere scene dense_10000 and the clump scene
+clump_500, 20000 steps, dt = 1e-6 s):
 
 * demcli with 1 and 2 numba threads (bench/bench_spheres.py), plus 2 threads with
   OMP_WAIT_POLICY=PASSIVE (see bench/README.md: on a shared 2-core machine the default
@@ -9,18 +10,23 @@ time), the peers' sphere scenes (default: dense, N = 10000, 20000 steps, dt = 1e
 * LIGGGHTS, LAMMPS and YADE through ../shared/peers (run as peers/run_all.sh runs them:
   from the folder that contains peers/, PEERS_WORK = a scratch folder, OMP_NUM_THREADS=1),
   when their binaries are on PATH; otherwise it says how to install them and goes on.
+* clump_NC (rigid clumps of 5-10 overlapping spheres, ../shared/peers/common/clump_setup.py):
+  demcli 1 and 2 threads (bench/bench_clumps.py) against YADE (peers/yade/clump.py, the only
+  peer with that scene); --clump-settle fall steps first, then the timed --steps window.
 
 Then a scaling row (demcli, 1 thread, dense, N = 1e3, 1e4, 1e5 [1e6 with --big], the same
 number of steps for every N: the cost per particle-step should stay flat), the geometry
 toolkit's bench/bench_sieve.py when it exists, and the 3D asphalt Marshall pipeline's wall time per
-stage against the lattice ball size (bench/bench_asphalt.py).
+stage against the lattice ball size (bench/bench_asphalt.py), and the cold/warm JIT
+compile time of `demcli run` on two smoke cases (bench/bench_jit.py).
 
 Every run is a separate process whose LAST line is ``particle_steps_per_s=<number>``.
 The table (runs, median, ratio to LIGGGHTS) is printed and written to bench/results.md
 (with date, machine, load averages, demcli version and the command).
 
-Usage: python bench/run_bench.py [--quick] [--scenes dense_10000,drop_10000] [--repeat K]
+Usage: python bench/run_bench.py [--quick] [--scenes dense_10000,clump_500] [--repeat K]
                                  [--skip-peers] [--skin S] [--peer-skin M] [--big]
+                                 [--clump-settle STEPS] [--no-jit]
                                  [--no-asphalt] [--asphalt-spacings 2.0,1.4,1.0,0.7]
 """
 
@@ -43,6 +49,9 @@ PEERS_DEFAULT = os.path.normpath(os.path.join(ROOT, "..", "shared", "peers"))
 PEER_BIN = {"liggghts": "liggghts", "lammps": "lmp", "yade": "yade"}
 PEER_ORDER = ("liggghts", "lammps", "yade")
 RATE = re.compile(r"^particle_steps_per_s=([0-9.eE+-]+)\s*$")
+SCENE = re.compile(r"(drop|dense|clump)_(\d+)")
+DEFAULT_SCENES = "dense_10000,clump_500"
+CLUMP_SETTLE = 100000   # fall steps before the clump window (the peers' RESULTS.md uses 100000)
 KV = re.compile(r"([A-Za-z_][A-Za-z_0-9]*)=([^\s]+)")
 
 
@@ -56,8 +65,12 @@ def parse_args(argv=None):
                     help="smoke test: dense_1000 for 2000 steps, small scaling row, small sieve run; "
                          "writes no results file unless --out is given")
     ap.add_argument("--scenes", default=None,
-                    help="comma list of VARIANT_N (VARIANT = drop|dense), default dense_10000 (--quick: dense_1000)")
+                    help="comma list of VARIANT_N (VARIANT = drop|dense|clump; N = spheres, or clumps for clump), "
+                         f"default {DEFAULT_SCENES} (--quick: dense_1000)")
     ap.add_argument("--steps", type=int, default=None, help="steps per scene run (default 20000; --quick: 2000)")
+    ap.add_argument("--clump-settle", type=int, default=None,
+                    help=f"fall steps before the timed window of clump scenes, same for demcli and YADE "
+                         f"(default {CLUMP_SETTLE}: the pile has formed; --quick: 2000)")
     ap.add_argument("--repeat", type=int, default=2, help="runs of every entry (default 2; the median is reported)")
     ap.add_argument("--threads", default="1,2", help="demcli thread counts (default 1,2)")
     ap.add_argument("--no-passive", action="store_true",
@@ -85,26 +98,33 @@ def parse_args(argv=None):
     ap.add_argument("--asphalt-spacings", default=None,
                     help="lattice ball diameters in mm for bench/bench_asphalt.py, comma list "
                          "(default its own: 2.0,1.4,1.0,0.7, a few minutes; --quick: 2.0,1.5)")
+    ap.add_argument("--no-jit", action="store_true",
+                    help="leave out bench/bench_jit.py (cold/warm compile time of two smoke cases, a few minutes; "
+                         "never run with --quick)")
     ap.add_argument("--out", default=None, help="results file (default bench/results.md; --quick: none)")
     a = ap.parse_args(argv)
     if a.scenes is None:
-        a.scenes = "dense_1000" if a.quick else "dense_10000"
+        a.scenes = "dense_1000" if a.quick else DEFAULT_SCENES
     if a.steps is None:
         a.steps = 2000 if a.quick else 20000
+    if a.clump_settle is None:
+        a.clump_settle = 2000 if a.quick else CLUMP_SETTLE
     if a.scaling_steps is None:
         a.scaling_steps = 200 if a.quick else 2000
     if a.out is None and not a.quick:
         a.out = os.path.join(HERE, "results.md")
     a.scene_list = []
     for s in a.scenes.split(","):
-        m = re.fullmatch(r"(drop|dense)_(\d+)", s.strip())
+        m = SCENE.fullmatch(s.strip())
         if not m:
-            ap.error(f"bad scene {s!r}: expected drop_N or dense_N")
+            ap.error(f"bad scene {s!r}: expected drop_N, dense_N or clump_N")
         a.scene_list.append((m.group(1), int(m.group(2))))
     a.thread_list = [int(t) for t in a.threads.split(",") if t.strip()]
     a.peer_list = [p for p in PEER_ORDER if p in [q.strip() for q in a.peers.split(",")]]
     if a.repeat < 1:
         ap.error("--repeat must be >= 1")
+    if a.clump_settle < 0:
+        ap.error("--clump-settle must be >= 0")
     return a
 
 
@@ -174,13 +194,15 @@ def run_proc(cmd, cwd, env, timeout):
             if ln.startswith("breakdown Neighbor list builds"):
                 rec["kv"]["neighbour_rebuilds"] = ln.split("=")[-1].strip()
             continue
+        prefix = "fall_" if ln.startswith("phase1_fall") else ""   # clump scenes: the fall phase's figures
         for k, v in KV.findall(ln):
-            rec["kv"][k] = v
+            rec["kv"][prefix + k] = v
     return rec
 
 
 def reference_rows(peers_dir):
-    """{(peer, variant, N): (run1, run2)} from the table in peers/RESULTS.md (may be empty)."""
+    """{(peer, variant, N): (rates [run1, run2], steps, info)} from the table in peers/RESULTS.md
+    (may be empty). info: for clump rows {"settle": fall steps, "members": member spheres}."""
     ref = {}
     try:
         text = open(os.path.join(peers_dir, "RESULTS.md"), encoding="utf-8").read()
@@ -188,13 +210,26 @@ def reference_rows(peers_dir):
         return ref
     for ln in text.splitlines():
         c = [x.strip() for x in ln.strip().strip("|").split("|")]
-        if len(c) >= 7 and c[0] in PEER_BIN and c[1] in ("drop", "dense") and c[2].isdigit():
+        if len(c) >= 7 and c[0] in PEER_BIN and c[1] in ("drop", "dense", "clump") and c[2].isdigit():
             try:
                 r = [float(x) for x in c[6].split("/")]
             except ValueError:
                 continue
-            ref[(c[0], c[1], int(c[2]))] = (r, int(c[3]))
+            info = {}
+            if c[1] == "clump":
+                note = " ".join(c[7:])
+                settle = re.search(r"fall phase \((\d+) steps\)", note)
+                members = re.search(r"(\d+) member spheres", note)
+                if not (settle and members):
+                    continue
+                info = {"settle": int(settle.group(1)), "members": int(members.group(1))}
+            ref[(c[0], c[1], int(c[2]))] = (r, int(c[3]), info)
     return ref
+
+
+def ref_matches(ref, steps, settle=None):
+    """A RESULTS.md row measured with the same window (and, for clumps, the same fall phase)."""
+    return ref is not None and ref[1] == steps and (settle is None or ref[2].get("settle") == settle)
 
 
 # ---------------------------------------------------------------------------------------
@@ -227,6 +262,12 @@ class Entry:
 def demcli_entries(a, variant, n, steps, threads_list, passive, env0):
     scene = f"{variant}_{n}"
     out = []
+    if variant == "clump":   # no PASSIVE row: the sphere scene already shows the OpenMP barrier effect
+        for t in threads_list:
+            cmd = [sys.executable, os.path.join(HERE, "bench_clumps.py"), str(n), str(a.clump_settle), str(steps),
+                   str(t), "--skin", repr(a.skin)]
+            out.append(Entry(scene, "demcli", t, cmd, ROOT, dict(env0, DEMCLI_PEERS=a.peers_dir), timeout=a.timeout))
+        return out
     for t in threads_list:
         cmd = [sys.executable, os.path.join(HERE, "bench_spheres.py"), str(n), variant, str(steps), str(t),
                "--skin", repr(a.skin)]
@@ -245,8 +286,15 @@ def peer_entries(a, variant, n, steps, installed, refs, work):
     shared = os.path.dirname(a.peers_dir)
     env = dict(os.environ, PEERS_WORK=work, OMP_NUM_THREADS="1")
     out = []
+    clump = variant == "clump"
+    settle = a.clump_settle if clump else None
     for p in a.peer_list:
-        if p == "yade":
+        if clump and p != "yade":
+            continue   # only YADE has the clump scene
+        if clump:
+            cmd = ["yade", "-j1", "-n", "-x", "peers/yade/clump.py", str(n), str(steps), str(settle)]
+            e = Entry(scene, p, 1, cmd, shared, dict(env), note="verletDist 0.5 r", timeout=a.yade_max_s)
+        elif p == "yade":
             cmd = ["yade", "-j1", "-n", "-x", "peers/yade/drop.py", str(n), str(steps), variant]
             e = Entry(scene, p, 1, cmd, shared, dict(env), note="verletDist 0.5 r", timeout=a.yade_max_s)
         else:
@@ -254,7 +302,7 @@ def peer_entries(a, variant, n, steps, installed, refs, work):
             e = Entry(scene, p, 1, cmd, shared, dict(env, DROP_SKIN=repr(a.peer_skin)),
                       note=f"skin {a.peer_skin * 1e3:g} mm", timeout=a.timeout)
         ref = refs.get((p, variant, n))
-        ref_ok = ref is not None and ref[1] == steps
+        ref_ok = ref_matches(ref, steps, settle)
         if p not in installed:
             if ref_ok:
                 e.reference = ref[0]
@@ -262,7 +310,8 @@ def peer_entries(a, variant, n, steps, installed, refs, work):
                 out.append(e)
             continue
         if p == "yade" and ref_ok:
-            expected = n * steps / min(ref[0])
+            # the clump fall phase runs faster than the window: counting it at the window's rate over-estimates
+            expected = (ref[2]["members"] * (steps + settle) if clump else n * steps) / min(ref[0])
             if expected > a.yade_max_s:
                 e.reference = ref[0]
                 e.note = f"RESULTS.md, not run here: ~{expected:.0f} s per run > {a.yade_max_s:.0f} s"
@@ -303,28 +352,34 @@ def run_entry(e, k):
 def contacts(e):
     for r in reversed(e.runs):
         kv = r["kv"]
-        if "contacts_pp" in kv:
-            return f"{kv['contacts_pp']} + {kv.get('contacts_wall', '?')}"
+        for pp in ("contacts_pp", "contacts_sphere_sphere"):   # spheres / clump scripts
+            if pp in kv:
+                return f"{kv[pp]} + {kv.get('contacts_wall', '?')}"
     return "—"
 
 
-def scene_table(entries, refs, repeat, steps):
+def peer_base(es, refs, peer, scene, steps, settle):
+    """(median of `peer` on this scene, note) for a ratio column: this session's runs, else the
+    RESULTS.md figure; (None, "") when neither exists."""
+    e = next((e for e in es if e.code == peer and e.median is not None), None)
+    if e is not None:
+        return e.median, (" (vs RESULTS.md)" if e.reference is not None else "")
+    variant, n = scene.split("_")
+    ref = refs.get((peer, variant, int(n)))
+    if ref_matches(ref, steps, settle if variant == "clump" else None):
+        return statistics.median(ref[0]), " (vs RESULTS.md" + (", skin 1 mm)" if peer != "yade" else ")")
+    return None, ""
+
+
+def scene_table(entries, refs, repeat, steps, settle):
     head = ["scene", "code", "threads", "particle-steps/s " + " / ".join(f"run{k + 1}" for k in range(repeat)),
-            "median", "ratio to LIGGGHTS", "contacts at end (p-p + wall)", "rebuilds"]
+            "median", "ratio to LIGGGHTS", "ratio to YADE", "contacts at end (p-p + wall)", "rebuilds"]
     rows = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     by_scene = {}
     for e in entries:
         by_scene.setdefault(e.scene, []).append(e)
     for scene, es in by_scene.items():
-        lig = next((e for e in es if e.code == "liggghts" and e.median is not None), None)
-        base, base_note = (lig.median, "") if lig else (None, "")
-        if lig and lig.reference is not None:
-            base_note = " (vs RESULTS.md)"
-        if base is None:
-            variant, n = scene.split("_")
-            ref = refs.get(("liggghts", variant, int(n)))
-            if ref and ref[1] == steps:
-                base, base_note = statistics.median(ref[0]), " (vs RESULTS.md, skin 1 mm)"
+        bases = [peer_base(es, refs, p, scene, steps, settle) for p in ("liggghts", "yade")]
         order = sorted(es, key=lambda e: (e.code != "demcli", PEER_ORDER.index(e.code) if e.code in PEER_ORDER
                                           else -1, e.threads, e.note))
         for e in order:
@@ -333,10 +388,11 @@ def scene_table(entries, refs, repeat, steps):
             else:
                 runs = " / ".join(fmt(r["rate"]) if r["rate"] is not None else "fail" for r in e.runs) or "—"
             med = e.median
-            ratio = f"{med / base:.2f}{base_note}" if med is not None and base else "—"
+            ratios = " | ".join(f"{med / base:.2f}{note}" if med is not None and base else "—"
+                                for base, note in bases)
             reb = next((r["kv"].get("neighbour_rebuilds") for r in reversed(e.runs)
                         if "neighbour_rebuilds" in r["kv"]), "—")
-            rows.append(f"| {scene} | {e.label()} | {e.threads} | {runs} | {fmt(med)} | {ratio} | "
+            rows.append(f"| {scene} | {e.label()} | {e.threads} | {runs} | {fmt(med)} | {ratios} | "
                         f"{contacts(e)} | {reb} |")
     return rows
 
@@ -376,16 +432,14 @@ def run_sieve(quick):
     return " ".join(shlex.quote(c) for c in ["python"] + cmd[1:]).replace(ROOT + "/", ""), text
 
 
-ASPHALT_BLOCK = re.compile(r"<!-- bench_asphalt:begin -->\n(.*?)\n<!-- bench_asphalt:end -->", re.S)
-
-
-def run_asphalt(a):
-    """bench/bench_asphalt.py: (command, markdown block or a FAILED line)."""
-    path = os.path.join(HERE, "bench_asphalt.py")
+def run_block_script(a, name, args, last_prefix):
+    """bench/<name>.py, whose output holds a Markdown block between ``<!-- name:begin -->`` and
+    ``<!-- name:end -->`` and ends with a ``last_prefix...`` line: (command, the block or a
+    FAILED line), None when the script is missing."""
+    path = os.path.join(HERE, f"{name}.py")
     if not os.path.exists(path):
         return None
-    cmd = [sys.executable, path] + (["--quick"] if a.quick else []) + \
-        (["--spacings", a.asphalt_spacings] if a.asphalt_spacings else [])
+    cmd = [sys.executable, path] + list(args)
     print(f"  [{time.strftime('%H:%M:%S')}] {os.path.relpath(path, ROOT)} (load {load()}) ...", flush=True)
     try:
         out = subprocess.run(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
@@ -398,11 +452,43 @@ def run_asphalt(a):
     for ln in lines:
         if ln.startswith("  ["):
             print("  " + ln.strip(), flush=True)
-    m = ASPHALT_BLOCK.search(text)
-    ok = rc == 0 and m is not None and lines and lines[-1].startswith("asphalt_compact_exponent=")
+    m = re.search(rf"<!-- {name}:begin -->\n(.*?)\n<!-- {name}:end -->", text, re.S)
+    ok = rc == 0 and m is not None and lines and lines[-1].startswith(last_prefix)
     block = m.group(1) if ok else f"FAILED (rc={rc}): " + " | ".join(lines[-3:])[-300:]
     print("  " + (lines[-1] if ok else block), flush=True)
     return " ".join(shlex.quote(c) for c in ["python"] + cmd[1:]).replace(ROOT + "/", ""), block
+
+
+def run_asphalt(a):
+    """bench/bench_asphalt.py: (command, markdown block or a FAILED line)."""
+    args = (["--quick"] if a.quick else []) + (["--spacings", a.asphalt_spacings] if a.asphalt_spacings else [])
+    return run_block_script(a, "bench_asphalt", args, "asphalt_compact_exponent=")
+
+
+def run_jit(a):
+    """bench/bench_jit.py (cold and warm compile): (command, markdown block or a FAILED line)."""
+    return run_block_script(a, "bench_jit", [], "jit_cold_s=")
+
+
+def clump_table(entries):
+    """Clump scenes: the fall phase and the state at the end of the window, per code (last run)."""
+    rows = ["| scene | code | threads | fall phase particle-steps/s (median) | window particle-steps/s (median) | "
+            "clump-steps/s (median) | contacts at end (p-p + wall) | highest clump centre mm | "
+            "kinetic energy J |", "|" + "---|" * 9]
+    for e in sorted(entries, key=lambda e: (e.scene, e.code != "demcli", e.threads)):
+        if not e.scene.startswith("clump_") or not e.runs:
+            continue
+        ok = [r for r in e.runs if r["rate"] is not None]
+        kv = ok[-1]["kv"] if ok else {}
+
+        def med(key):
+            vals = [float(r["kv"][key]) for r in ok if key in r["kv"]]
+            return fmt(statistics.median(vals)) if vals else "—"
+
+        rows.append(f"| {e.scene} | {e.label()} | {e.threads} | {med('fall_particle_steps_per_s')} | {fmt(e.median)} "
+                    f"| {med('clump_steps_per_s')} | {contacts(e)} | {kv.get('zmax_mm', '—')} | "
+                    f"{kv.get('kinetic_energy_J', '— (not printed)')} |")
+    return rows if len(rows) > 2 else []
 
 
 def main(argv=None):
@@ -432,6 +518,12 @@ def main(argv=None):
                   f"      Going on with {', '.join(['demcli'] + installed)}; missing peers are shown with "
                   f"their ../shared/peers/RESULTS.md figures.")
     refs = reference_rows(a.peers_dir) if os.path.isdir(a.peers_dir) else {}
+    if not os.path.isfile(os.path.join(a.peers_dir, "common", "clump_setup.py")):
+        dropped = [f"{v}_{n}" for v, n in a.scene_list if v == "clump"]
+        if dropped:
+            print(f"NOTE: no {os.path.join(a.peers_dir, 'common', 'clump_setup.py')}: leaving out "
+                  f"{', '.join(dropped)} (the clump scene is defined there)")
+        a.scene_list = [(v, n) for v, n in a.scene_list if v != "clump"]
 
     work = tempfile.mkdtemp(prefix="demcli_bench_peers_")
     env0 = dict(os.environ)
@@ -441,7 +533,8 @@ def main(argv=None):
         peers = [] if a.skip_peers else peer_entries(a, variant, n, a.steps, installed, refs, work)
         for e in peers:
             ref = refs.get((e.code, variant, n))
-            e.refback = ref[0] if ref and ref[1] == a.steps else None
+            e.refback = ref[0] if ref_matches(ref, a.steps, a.clump_settle if variant == "clump" else None) \
+                else None
         entries.append(interleave(dem, peers))
 
     print(f"scenes: {', '.join(f'{v}_{n}' for v, n in a.scene_list)}, {a.steps} steps, {a.repeat} run(s) each, "
@@ -463,6 +556,7 @@ def main(argv=None):
 
     sieve = None if a.no_sieve else run_sieve(a.quick)
     asphalt = None if a.no_asphalt else run_asphalt(a)
+    jit = None if (a.no_jit or a.quick) else run_jit(a)
     # 2D sections; ballast library build rate; polyhedron narrow phase; the peers' poly scene; a bonded specimen
     quick_args = {"bench_polygons.py": ["--quick"], "bench_library.py": ["--quick"], "bench_polyhedra.py": [],
                   "bench_poly.py": ["--n", "100", "--steps", "1000"], "bench_bonds.py": ["--steps", "2000"]}
@@ -484,14 +578,23 @@ def main(argv=None):
           f"- load average (1/5/15 min): {load0} at start, {load1} at the end "
           f"({(finished - started).total_seconds() / 60:.1f} min)",
           f"- command: `{command}`",
-          f"- scenes: the peers' sphere scenes (../shared/peers/common/drop_setup.py), {a.steps} steps, dt 1e-6 s; "
-          f"each entry run {a.repeat}x, alternating demcli and peers; the median is the figure to compare",
+          f"- scenes: the peers' scenes (spheres: ../shared/peers/common/drop_setup.py), {a.steps} steps, "
+          f"dt 1e-6 s; each entry run {a.repeat}x, alternating demcli and peers; the median is the figure to compare",
+          *([f"- clump_NC: NC rigid clumps of 5-10 overlapping spheres r = 1 mm "
+             f"(../shared/peers/common/clump_setup.py), {a.clump_settle} fall steps (not in the rate), then the "
+             f"{a.steps}-step window; counted per member sphere; demcli clump mass = union of the members "
+             "(overlaps once), YADE's = sum of the members (see bench/scene_clumps.py); YADE is the only peer "
+             "with this scene"] if any(v == "clump" for v, _ in a.scene_list) else []),
           f"- demcli skin {a.skin:g} r = {a.skin:g} mm; LIGGGHTS/LAMMPS skin {a.peer_skin * 1e3:g} mm "
           f"(DROP_SKIN={a.peer_skin:g}); YADE verletDist 0.5 r (its default, drop.py has no option); "
           "peers single-threaded (OMP_NUM_THREADS=1, one MPI rank, yade -j1)",
           "- particle-steps/s = N x steps / seconds of the time-stepping loop only (no start-up, set-up or JIT)",
           ""]
-    md += scene_table(flat, refs, a.repeat, a.steps)
+    md += scene_table(flat, refs, a.repeat, a.steps, a.clump_settle)
+    ctab = clump_table(flat)
+    if ctab:
+        md += ["", f"Clump scene, fall phase ({a.clump_settle} steps) and state at the end of the window "
+                   "(last run of each entry):", ""] + ctab
     if scaling:
         md += ["", f"Scaling (demcli, 1 thread, dense scene, {a.scaling_steps} steps from the initial lattice; "
                    "the cost per particle-step should stay flat):", ""]
@@ -501,6 +604,9 @@ def main(argv=None):
     if asphalt:
         md += ["", f"3D asphalt, Marshall pipeline against the lattice ball size (`{asphalt[0]}`; "
                    "see docs/asphalt3d.md, \"Cost against ball size\"):", "", asphalt[1]]
+    if jit:
+        md += ["", f"JIT compile, whole `demcli run` wall time with an empty numba cache (cold) and from it (warm), "
+                   f"one thread (`{jit[0]}`):", "", jit[1]]
     fails = [(e, r) for e in flat + scaling for r in e.runs if r["rate"] is None]
     if fails:
         md += ["", "Failed runs:"] + [f"- {e.scene} {e.label()}: {r['error']}" for e, r in fails]

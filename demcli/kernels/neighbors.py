@@ -153,12 +153,13 @@ def build_pairs(xs, rad, body, skin, max_cells):
     lo, inv_h, nc = _grid(xs, rad, skin, max_cells)
     cell_start, items = _bin(xs, lo, inv_h, nc)
     dummy = np.empty(0, np.int64)
-    _scan_pairs(xs, rad, body, skin, lo, inv_h, nc, cell_start, items, start, dummy, False)
+    # np.bool_: a typed flag, not a literal, so that both passes share one compiled scan
+    _scan_pairs(xs, rad, body, skin, lo, inv_h, nc, cell_start, items, start, dummy, np.bool_(False))
     for i in range(n):
         start[i + 1] += start[i]
     npair = start[n]
     pj = np.empty(npair, np.int64)
-    _scan_pairs(xs, rad, body, skin, lo, inv_h, nc, cell_start, items, start, pj, True)
+    _scan_pairs(xs, rad, body, skin, lo, inv_h, nc, cell_start, items, start, pj, np.bool_(True))
     pi = np.empty(npair, np.int64)
     for i in range(n):
         for c in range(start[i], start[i + 1]):
@@ -227,11 +228,12 @@ def build_wall_pairs(xs, rad, skin, wkind, wpoint, wnormal, wradius):
     n = xs.shape[0]
     start = np.zeros(n + 1, np.int64)
     dummy = np.empty(0, np.int64)
-    _scan_walls(xs, rad, skin, wkind, wpoint, wnormal, wradius, start, dummy, False)
+    # np.bool_: a typed flag, not a literal, so that both passes share one compiled scan
+    _scan_walls(xs, rad, skin, wkind, wpoint, wnormal, wradius, start, dummy, np.bool_(False))
     for i in range(n):
         start[i + 1] += start[i]
     wall = np.empty(start[n], np.int64)
-    _scan_walls(xs, rad, skin, wkind, wpoint, wnormal, wradius, start, wall, True)
+    _scan_walls(xs, rad, skin, wkind, wpoint, wnormal, wradius, start, wall, np.bool_(True))
     sph = np.empty(start[n], np.int64)
     for i in range(n):
         for c in range(start[i], start[i + 1]):

@@ -731,10 +731,13 @@ def overlap_ws(va, fsa, fva, offa, na, da, cax, cay, caz, ra,
     for c in range(3):
         fw[22 + c] = np.inf
         fw[25 + c] = -np.inf
-    _faces_inside(va, fsa, fva, offa, na, da, planes, 0, nca, nb, db, nca, ncb, qa - nna, nnb, tol, band, True,
-                  buf, cap, fw)
-    _faces_inside(vb, fsb, fvb, offb, nb, db, planes, nca, ncb, na, da, 0, nca, qa, nna, tol, band, False,
-                  buf, cap, fw)
+    # typed values, not literals (0, True, a count numba typed as the constant 0): one
+    # compiled _faces_inside then serves both calls (it was compiled four times)
+    zero = np.int64(0)
+    _faces_inside(va, fsa, fva, offa, na, da, planes, zero, nca, nb, db, nca, ncb, qa - nna, np.int64(nnb), tol,
+                  band, np.bool_(True), buf, cap, fw)
+    _faces_inside(vb, fsb, fvb, offb, nb, db, planes, nca, ncb, na, da, zero, nca, qa, np.int64(nna), tol,
+                  band, np.bool_(False), buf, cap, fw)
     return _finish(fw, 18, mx_, my_, mz_)
 
 

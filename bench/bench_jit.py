@@ -1,0 +1,109 @@
+"""Cold and warm JIT: wall time of ``demcli run CASE`` with an empty numba cache, then from it.
+
+For every case (default: the sphere smoke case cases/smoke/beads.yaml, 150 spheres and 3000
+steps, and the polyhedral one cases/smoke/ballast_deposit.yaml, ~140 ballast stones and 9000
+steps), ``python -m demcli run CASE --out <tmp> --threads 1 --quiet --force`` runs twice in
+fresh processes with ``NUMBA_CACHE_DIR`` = a new empty folder (demcli.jit puts its cache in
+a digest-named folder under it):
+
+* cold: the cache is empty, every kernel the case calls is compiled;
+* warm: the same command again, the kernels load from the cache the cold run filled.
+
+Both are whole-process wall times (interpreter start, imports, every stage, output files),
+as a user sees them. ``cold - warm`` is the compile cost. The time-stepping loops of the
+dem stages (the "N steps in X s" log lines) are listed apart: that part is the case's
+own work, not start-up. The issue's targets: cold under 60 s, warm under 3 s.
+
+Usage: python bench/bench_jit.py [CASE ...] [--threads T]
+
+Prints a Markdown table between ``<!-- bench_jit:begin -->`` / ``<!-- bench_jit:end -->``
+(bench/run_bench.py copies it into bench/results.md); the LAST line is
+``jit_cold_s=<max over cases> jit_warm_s=<max over cases>``.
+"""
+
+import argparse
+import os
+import re
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+ROOT = os.path.dirname(HERE)
+CASES = ("cases/smoke/beads.yaml", "cases/smoke/ballast_deposit.yaml")
+COLD_TARGET_S = 60.0
+WARM_TARGET_S = 3.0
+LOOP = re.compile(r"\] (\d+) steps in ([0-9.]+) s")
+
+
+def run_case(case, cache, out, threads, timeout):
+    """(wall s, stepping-loop s from the log, error or None) of one ``demcli run``."""
+    env = dict(os.environ, NUMBA_CACHE_DIR=cache, DEMCLI_NUMBA_CACHE="1")
+    env.pop("NUMBA_DISABLE_JIT", None)
+    cmd = [sys.executable, "-m", "demcli", "run", case, "--out", out, "--threads", str(threads), "--quiet",
+           "--force"]
+    t0 = time.perf_counter()
+    try:
+        p = subprocess.run(cmd, cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                           timeout=timeout)
+        err = None if p.returncode == 0 else f"rc={p.returncode}: " + p.stdout.strip()[-300:]
+    except subprocess.TimeoutExpired:
+        err = f"killed after {timeout:.0f} s"
+    wall = time.perf_counter() - t0
+    loop = 0.0
+    try:
+        with open(os.path.join(out, "log.txt"), encoding="utf-8") as f:
+            loop = sum(float(m.group(2)) for m in LOOP.finditer(f.read()))
+    except OSError:
+        pass
+    return wall, loop, err
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+                                 formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__)
+    ap.add_argument("cases", nargs="*", default=list(CASES), help="case files (default: %(default)s)")
+    ap.add_argument("--threads", type=int, default=1, help="--threads of demcli run (default 1)")
+    ap.add_argument("--timeout", type=float, default=900.0, help="kill a run after this many seconds")
+    a = ap.parse_args(argv)
+
+    rows, worst_cold, worst_warm, failed = [], 0.0, 0.0, False
+    for case in a.cases:
+        tmp = tempfile.mkdtemp(prefix="demcli_bench_jit_")
+        try:
+            cache = os.path.join(tmp, "numba")
+            os.makedirs(cache)
+            res = {}
+            for kind in ("cold", "warm"):
+                print(f"  [{time.strftime('%H:%M:%S')}] {case} {kind} (load {os.getloadavg()[0]:.2f}) ...",
+                      end="", flush=True)
+                res[kind] = run_case(case, cache, os.path.join(tmp, kind), a.threads, a.timeout)
+                wall, loop, err = res[kind]
+                print(f" {wall:.1f} s" + (f" FAILED {err}" if err else ""), flush=True)
+            files = sum(len(f) for _, _, f in os.walk(cache))
+        finally:
+            shutil.rmtree(tmp, ignore_errors=True)
+        (cw, cl, ce), (ww, wl, we) = res["cold"], res["warm"]
+        failed |= bool(ce or we)
+        worst_cold, worst_warm = max(worst_cold, cw), max(worst_warm, ww)
+        verdict = ("cold " + ("ok" if cw < COLD_TARGET_S else "OVER") + ", warm "
+                   + ("ok" if ww < WARM_TARGET_S else "OVER")) if not (ce or we) else "FAILED: " + (ce or we)
+        rows.append(f"| `{case}` | {cw:.1f} | {ww:.1f} | {cw - ww:.1f} | {wl:.2f} | {ww - wl:.1f} | {files} | "
+                    f"{verdict} |")
+
+    print("<!-- bench_jit:begin -->")
+    print("| case | cold s (empty cache) | warm s (from cache) | cold - warm s (compile) | "
+          "stepping loops s (warm) | warm - loops s | cache files | targets (cold < "
+          f"{COLD_TARGET_S:g} s, warm < {WARM_TARGET_S:g} s) |")
+    print("|---|---|---|---|---|---|---|---|")
+    for r in rows:
+        print(r)
+    print("<!-- bench_jit:end -->")
+    print(f"jit_cold_s={worst_cold:.2f} jit_warm_s={worst_warm:.2f}")
+    return 1 if failed else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
