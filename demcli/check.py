@@ -48,8 +48,10 @@ def describe_case(path, overrides=()):
         if cfg.type != "dem":
             continue
         scene = _scene_estimate(case, k)
-        poly = any(c.type == "assemble" for c in case.stages[:k])
-        plan = dem.plan_summary(case, cfg, {"clumps": bool(scene and scene[3]), "polyhedra": poly})
+        kinds = [c.type for c in case.stages[:k] if c.type in ("assemble", "clumpify")]
+        poly = bool(kinds) and kinds[-1] == "assemble"
+        clumped = bool(kinds) and kinds[-1] == "clumpify"  # polyhedra made clumps of spheres
+        plan = dem.plan_summary(case, cfg, {"clumps": bool(scene and scene[3]) or clumped, "polyhedra": poly})
         lines += ["  " + line for line in plan.describe().splitlines()]
         if cfg.walls:
             lines.append(f"  walls: {len(dem.build_walls(cfg, case))}")

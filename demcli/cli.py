@@ -28,11 +28,23 @@ def run(case, from_stage, only, force, overrides, out, threads, quiet, resume):
     """Run the stages of CASE (a YAML file)."""
     from demcli.pipeline import run_case
 
+    _sigterm_as_interrupt()
     results = run_case(case, out=out, from_stage=from_stage, only=only, force=force, overrides=overrides,
                        threads=threads, quiet=quiet, resume=resume)
     if not quiet:
         for r in results:
             click.echo(f"{r.name:>16}  {'skipped' if r.skipped else f'{r.wall_time:8.2f} s'}  {r.path}")
+
+
+def _sigterm_as_interrupt():
+    """SIGTERM (a batch system's time limit, ``kill``) stops a run as Ctrl-C does: the running
+    stage writes its checkpoint for ``--resume``."""
+    import signal
+
+    def handler(signum, frame):
+        raise KeyboardInterrupt
+
+    signal.signal(signal.SIGTERM, handler)
 
 
 @cli.command()
@@ -75,7 +87,8 @@ def compare(runs, record, x, ys, out):
 @cli.command()
 @click.argument("case", type=click.Path(dir_okay=False))
 @click.option("--vary", "varies", multiple=True, required=True, metavar="PATH=V1,V2,...",
-              help="Values of one case path (as --set takes them); several --vary make a grid.")
+              help="Values of one case path (as --set takes them); several --vary make a grid, and "
+                   "+PATH=W1,W2,... varies a path together with the --vary before it (paired by position).")
 @click.option("--metric", required=True, metavar="STAGE.TABLE.COLUMN[@REDUCER]",
               help="Column of records/<stage>_<table>.csv, reduced by @last (default), @first, @max, @min or @mean.")
 @click.option("--reference", default="last", show_default=True, metavar="last|first|VARIANT",

@@ -1,7 +1,8 @@
 """``demcli study``: what accuracy costs in time.
 
 A study runs one case several times with settings varied (``--vary path=v1,v2,...``;
-several ``--vary`` make a grid, their cartesian product), reads one number from each
+several ``--vary`` make a grid, their cartesian product, and ``--vary +path=w1,w2,...`` varies
+a path together with the one before it, paired by position), reads one number from each
 run's records (``--metric STAGE.TABLE.COLUMN[@last|@first|@max|@min|@mean]``) and reports,
 per variant, the varied values, the metric, its error against the finest variant and the
 wall time, as ``study.csv``, ``study.md`` and an error-versus-time plot ``study.png``::
@@ -51,11 +52,18 @@ _SLUG_CHARS = re.compile(r"[^A-Za-z0-9._+\-]")
 
 @dataclass(frozen=True)
 class Vary:
-    """One ``--vary``: a case path and the values (YAML text, as ``--set`` takes them)."""
+    """One ``--vary``: a case path and the values (YAML text, as ``--set`` takes them).
+
+    ``along``: varied together with the ``--vary`` before it (written ``+path=...``): the
+    values pair by position instead of making a grid. ``group``: the index of the grid axis
+    the path belongs to (set by :func:`make_variants`).
+    """
 
     path: str
     values: tuple
     label: str = ""  # short name in tables and folder names (the path's last segments)
+    along: bool = False
+    group: int = 0
 
 
 @dataclass(frozen=True)
@@ -91,10 +99,13 @@ def split_values(text):
 
 
 def parse_vary(text):
-    """A :class:`Vary` from ``path=v1,v2,...``; InputError naming the rule it breaks."""
+    """A :class:`Vary` from ``path=v1,v2,...``, or ``+path=v1,v2,...`` for a path varied
+    along with the previous one; InputError naming the rule it breaks."""
     path, sep, values = text.partition("=")
     path = path.strip()
     where = f"--vary {text}"
+    along = path.startswith("+")
+    path = path[1:].strip() if along else path
     if not sep or not path:
         raise InputError(f"{where}: write PATH=V1,V2,..., e.g. stages.settle.time.dt_factor=0.4,0.2,0.1")
     if any(not seg.strip() for seg in path.split(".")):
@@ -107,7 +118,7 @@ def parse_vary(text):
         if v in seen:
             raise InputError(f"{where}: value {v!r} is given twice")
         seen.add(v)
-    return Vary(path, tuple(vals))
+    return Vary(path, tuple(vals), along=along)
 
 
 def _labels(paths):
@@ -128,14 +139,25 @@ def _slug_value(value):
 
 
 def make_variants(varies):
-    """``(varies with labels, variants)``: the grid of every combination, first --vary slowest."""
+    """``(varies with labels and groups, variants)``: the grid of every combination, first
+    --vary slowest; a ``+path`` --vary (``along``) joins the axis of the one before it, its
+    values paired with that one's by position. A variant's folder name holds the first path
+    of each axis (its values are distinct, so they name the variant)."""
     if not varies:
         raise InputError("a study needs at least one --vary PATH=V1,V2,...")
     paths = [v.path for v in varies]
     for p in paths:
         if paths.count(p) > 1:
             raise InputError(f"--vary {p}: the path is varied twice; give all its values in one --vary")
-    varies = [Vary(v.path, v.values, lab) for v, lab in zip(varies, _labels(paths))]
+    if varies[0].along:
+        raise InputError(f"--vary +{varies[0].path}: a leading + joins the --vary before it, and there is none")
+    groups = [g - 1 for g in itertools.accumulate(0 if v.along else 1 for v in varies)]  # axis of each path
+    for v, g in zip(varies, groups):
+        head = varies[groups.index(g)]
+        if v.along and len(v.values) != len(head.values):
+            raise InputError(f"--vary +{v.path}: {len(v.values)} values to pair with the {len(head.values)} of "
+                             f"--vary {head.path}; a + path needs one value per value of the path it joins")
+    varies = [Vary(v.path, v.values, lab, v.along, g) for v, lab, g in zip(varies, _labels(paths), groups)]
     for v in varies:
         slugs = {}
         for value in v.values:
@@ -144,9 +166,14 @@ def make_variants(varies):
                 raise InputError(f"--vary {v.path}: values {slugs[s]!r} and {value!r} name the same folder "
                                  f"({v.label}={s}); write them alike or drop one")
             slugs[s] = value
+    axes = [[k for k, g in enumerate(groups) if g == a] for a in range(groups[-1] + 1)]
     variants = []
-    for combo in itertools.product(*(v.values for v in varies)):
-        slug = ",".join(f"{v.label}={_slug_value(value)}" for v, value in zip(varies, combo))
+    for picks in itertools.product(*(range(len(varies[ax[0]].values)) for ax in axes)):
+        combo = [None] * len(varies)
+        for ax, i in zip(axes, picks):
+            for k in ax:
+                combo[k] = varies[k].values[i]
+        slug = ",".join(f"{varies[ax[0]].label}={_slug_value(combo[ax[0]])}" for ax in axes)
         variants.append(Variant(slug, tuple(combo)))
     return varies, variants
 
@@ -589,7 +616,7 @@ def write_plot(path_png, result):
     for k, row in enumerate(result.rows):
         if k == result.reference:
             continue
-        key = ", ".join(f"{v.label}={val}" for v, val in zip(result.varies[1:], row.variant.values[1:]))
+        key = ", ".join(f"{v.label}={val}" for v, val in zip(result.varies, row.variant.values) if v.group > 0)
         series.setdefault(key, []).append(row)
     plotted = 0
     for key, rows in series.items():

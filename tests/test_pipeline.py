@@ -59,32 +59,92 @@ def test_other_seed_differs(smoke_case, tmp_path, h5_datasets):
     assert not np.array_equal(xa, xb)
 
 
-def test_interrupted_and_resumed_equals_uninterrupted(smoke_case, tmp_path, monkeypatch, h5_differences):
-    # Given an uninterrupted reference run
-    run_case(smoke_case, out=tmp_path / "ref", quiet=True)
-    # When a run is interrupted (Ctrl-C) in the middle of the dem stage
+def _raise_at_chunk(monkeypatch, exc, k):
+    """Make the k-th System.advance call (a chunk of the dem stage) raise ``exc``; returns
+    a function that puts the real advance back."""
     from demcli.engine import system as system_mod
 
     real = system_mod.System.advance
     calls = {"n": 0}
 
-    def interrupted(self, n):
+    def advance(self, n):
         calls["n"] += 1
-        if calls["n"] == 12:
-            raise KeyboardInterrupt
+        if calls["n"] == k:
+            raise exc
         return real(self, n)
 
-    monkeypatch.setattr(system_mod.System, "advance", interrupted)
+    monkeypatch.setattr(system_mod.System, "advance", advance)
+    return lambda: monkeypatch.setattr(system_mod.System, "advance", real)
+
+
+def test_interrupted_and_resumed_equals_uninterrupted(smoke_case, tmp_path, monkeypatch, h5_differences):
+    # Given an uninterrupted reference run
+    run_case(smoke_case, out=tmp_path / "ref", quiet=True)
+    # When a run is interrupted (Ctrl-C) in the middle of the dem stage
+    restore = _raise_at_chunk(monkeypatch, KeyboardInterrupt, 12)
     with pytest.raises(StageError, match="interrupted"):
         run_case(smoke_case, out=tmp_path / "run", quiet=True)
     assert (tmp_path / "run" / "01-settle.ckpt.h5").exists()
     assert not (tmp_path / "run" / "01-settle.h5").exists()
     # and resumed
-    monkeypatch.setattr(system_mod.System, "advance", real)
+    restore()
     res = run_case(smoke_case, out=tmp_path / "run", quiet=True, resume=True)
     # Then the first stage is skipped, the checkpoint is gone, and the result is bit-identical
     assert [r.skipped for r in res] == [True, False]
     assert not (tmp_path / "run" / "01-settle.ckpt.h5").exists()
+    assert h5_differences(tmp_path / "ref" / "01-settle.h5", tmp_path / "run" / "01-settle.h5") == []
+
+
+class _Crash(BaseException):
+    """A hard stop (power cut, kill -9, a job's time limit without a signal): nothing is written."""
+
+
+def test_periodic_checkpoint_survives_a_hard_stop(smoke_case, tmp_path, monkeypatch, h5_differences):
+    # Given an uninterrupted reference run
+    run_case(smoke_case, out=tmp_path / "ref", quiet=True)
+    # When a run that checkpoints at every record (any wall-clock interval elapses) dies mid-stage
+    # without the chance to write anything
+    every = ["stages.settle.output.checkpoint=1e-9 s"]
+    restore = _raise_at_chunk(monkeypatch, _Crash, 12)
+    with pytest.raises(_Crash):
+        run_case(smoke_case, out=tmp_path / "run", quiet=True, overrides=every)
+    # Then the last periodic checkpoint is there, from a step before the crash
+    ckpt = tmp_path / "run" / "01-settle.ckpt.h5"
+    with h5py.File(ckpt, "r") as f:
+        assert 0 < f["meta"].attrs["step"] < 3000
+    # and resuming from it gives the uninterrupted result, bit for bit, and removes it
+    restore()
+    res = run_case(smoke_case, out=tmp_path / "run", quiet=True, resume=True, overrides=every)
+    assert [r.skipped for r in res] == [True, False]
+    assert not ckpt.exists()
+    assert h5_differences(tmp_path / "ref" / "01-settle.h5", tmp_path / "run" / "01-settle.h5") == []
+
+
+def test_sigterm_writes_a_checkpoint(smoke_case, tmp_path, h5_differences):
+    # Given an uninterrupted reference run
+    run_case(smoke_case, out=tmp_path / "ref", quiet=True)
+    # When `demcli run` gets SIGTERM (a batch system's time limit) in the middle of the dem stage
+    script = f"""
+import os, signal, sys
+from demcli.engine import system as system_mod
+from demcli.cli import main
+real = system_mod.System.advance
+calls = [0]
+def advance(self, n):
+    calls[0] += 1
+    if calls[0] == 12:
+        os.kill(os.getpid(), signal.SIGTERM)
+    return real(self, n)
+system_mod.System.advance = advance
+main(["run", {str(smoke_case)!r}, "--out", {str(tmp_path / "run")!r}, "--quiet", "--threads", "1"])
+"""
+    proc = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=300)
+    # Then it stops with a message (no traceback) and leaves the checkpoint
+    assert proc.returncode != 0
+    assert "interrupted" in proc.stderr and "--resume" in proc.stderr and "Traceback" not in proc.stderr
+    assert (tmp_path / "run" / "01-settle.ckpt.h5").exists()
+    # and --resume finishes it bit-identically
+    run_case(smoke_case, out=tmp_path / "run", quiet=True, resume=True)
     assert h5_differences(tmp_path / "ref" / "01-settle.h5", tmp_path / "run" / "01-settle.h5") == []
 
 

@@ -105,6 +105,33 @@ def test_labels_grow_until_unique_and_values_become_folder_names():
         make_variants([parse_vary("seed=1,2"), parse_vary("seed=3")])
 
 
+def test_a_plus_vary_pairs_with_the_one_before_instead_of_crossing():
+    # Given two paths varied together (+) and a third crossing them
+    varies, variants = make_variants([parse_vary("stages.deposit.scaling.stiffness=0.01,0.001,0.0001"),
+                                      parse_vary("+stages.vibrate.scaling.stiffness=0.01,0.001,0.0001"),
+                                      parse_vary("seed=1,2")])
+    # Then the pair is one axis of the grid: 3 x 2 variants, not 3 x 3 x 2
+    assert len(variants) == 6
+    assert [v.group for v in varies] == [0, 0, 1] and [v.along for v in varies] == [False, True, False]
+    assert variants[2].overrides(varies) == ["stages.deposit.scaling.stiffness=0.001",
+                                             "stages.vibrate.scaling.stiffness=0.001", "seed=1"]
+    # and folders are named by the first path of each axis; the reference is the last pair
+    assert variants[2].slug == "deposit.scaling.stiffness=0.001,seed=1"
+    assert variants[pick_reference(varies, variants)].values == ("0.0001", "0.0001", "2")
+    # and a study reads its values with the +, spaces allowed
+    assert parse_vary(" + stages.b.count=1,2") == parse_vary("+stages.b.count=1,2")
+
+
+@pytest.mark.parametrize("texts, needle", [
+    (["+stages.b.count=1,2"], "there is none"),
+    (["stages.a.time.dt_factor=0.4,0.2", "+stages.b.count=1,2,3"], "3 values to pair with the 2"),
+    (["stages.a.time.dt_factor=0.4,0.2", "+stages.a.time.dt_factor=0.1,0.05"], "varied twice"),
+])
+def test_a_bad_plus_vary_is_named(texts, needle):
+    with pytest.raises(InputError, match=needle):
+        make_variants([parse_vary(t) for t in texts])
+
+
 def test_every_variant_is_validated_before_any_runs():
     varies, variants = make_variants([parse_vary(f"{DT}=0.5,2,3")])
     with pytest.raises(InputError) as info:
@@ -116,9 +143,14 @@ def test_every_variant_is_validated_before_any_runs():
     assert "must be in (0, 1]" in text
 
 
-def test_the_shipped_study_command_is_valid():
-    # Given the command line written in the shipped study's header
-    lines = [ln[1:].strip() for ln in IMPACT.read_text().splitlines() if ln.startswith("#")]
+# the shipped studies: the files whose header reads "# Study: ..." (a study's reference case is a plain run)
+STUDIES = [p for p in sorted((CASES / "studies").glob("*.yaml")) if p.read_text().startswith("# Study")]
+
+
+@pytest.mark.parametrize("study", STUDIES, ids=lambda p: p.name)
+def test_the_shipped_study_commands_are_valid(study):
+    # Given the command line written in a shipped study's header
+    lines = [ln[1:].strip() for ln in study.read_text().splitlines() if ln.startswith("#")]
     start = next(i for i, ln in enumerate(lines) if ln.startswith("demcli study"))
     text = ""
     for ln in lines[start:]:
@@ -126,12 +158,13 @@ def test_the_shipped_study_command_is_valid():
         if not ln.endswith("\\"):
             break
     args = shlex.split(text)
-    assert args[2] == "cases/studies/timestep_impact.yaml"
+    assert args[2] == f"cases/studies/{study.name}"
     varies = [parse_vary(args[k + 1]) for k, a in enumerate(args) if a == "--vary"]
+    fixed = [args[k + 1] for k, a in enumerate(args) if a == "--set"]
     metric = parse_metric(args[args.index("--metric") + 1])
     # Then its variants and metric validate against the case
     varies, variants = make_variants(varies)
-    check_metric_stage(metric, validate_variants(IMPACT, varies, variants))
+    check_metric_stage(metric, validate_variants(study, varies, variants, fixed))
 
 
 # ---- the metric and the errors ---------------------------------------------------------------
@@ -249,6 +282,20 @@ def test_parallel_jobs_give_the_serial_numbers(tiny_study, tmp_path):
     for a, b in zip(serial, parallel):
         assert a["variant"] == b["variant"] and b["status"].startswith("ran")
         assert a["kinetic@last[J]"] == b["kinetic@last[J]"] and a["error[J]"] == b["error[J]"]
+
+
+def test_paths_varied_together_run_as_pairs(tmp_path):
+    # When the step and the duration are varied together (two variants, not four)
+    result = _invoke(["study", IMPACT, *TINY, "--vary", f"{DT}=0.4,0.2", "--vary",
+                      "+stages.impact.time.duration=1e-4 s,1.2e-4 s", "--metric", "impact.dem.time@last",
+                      "--out", tmp_path, "--jobs", "1", "--quiet"])
+    assert result.exit_code == 0, result.output
+    # Then each variant ran with its pair of values, in a folder named by the first path
+    assert sorted(p.name for p in tmp_path.iterdir() if p.is_dir()) == ["dt_factor=0.2", "dt_factor=0.4"]
+    rows = _rows(tmp_path / "study.csv")
+    assert [(r["dt_factor"], r["duration"]) for r in rows] == [("0.4", "1e-4 s"), ("0.2", "1.2e-4 s")]
+    assert [float(r["time@last[s]"]) for r in rows] == pytest.approx([1e-4, 1.2e-4], rel=0.05)
+    assert "| dt_factor | duration | time@last [s] |" in result.output
 
 
 def test_a_failing_variant_is_reported_and_the_study_goes_on(tmp_path):

@@ -40,13 +40,17 @@ for _name, _kind, _dims, _unit, _doc, _kw in [
         ("moment_b", "f", ("n_bd", 3), "N m", "bending moment on i (parallel bond)", {}),
         ("kelvin_n", "f", ("n_bd",), "m", "Kelvin displacement in normal tension (Burgers)", {}),
         ("kelvin_s", "f", ("n_bd", 3), "m", "Kelvin displacement in shear (Burgers)", {}),
-        ("separation", "f", ("n_bd",), "m", "gap between the spheres at the last step, 0 when touching", {})]:
+        ("separation", "f", ("n_bd",), "m", "gap between the spheres at the last step, 0 when touching", {}),
+        ("overlap0", "f", ("n_bd",), "m", "reference overlap delta_0 of a contact bond: F_n = k_n (delta - "
+                                          "delta_0); the overlap at creation when installed stress-free, else 0",
+         {})]:
     register(Field(f"bonds/{_name}", _kind, _dims, _unit, _doc, writer="effect bonds", **_kw))
 
 PARAM_NAMES = ("kind", "kn", "ks", "normal_strength", "shear_strength", "bond_kn", "bond_ks", "radius_multiplier",
                "tension_km", "tension_cm", "tension_kk", "tension_ck", "shear_km", "shear_cm", "shear_kk", "shear_ck")
 _HIST_FIELDS = (("force_n", B.H_FN, 1), ("force_s", B.H_FS, 3), ("moment_t", B.H_MT, 1), ("moment_b", B.H_MB, 3),
-                ("kelvin_n", B.H_UKN, 1), ("kelvin_s", B.H_UKS, 3), ("separation", B.H_SEP, 1))
+                ("kelvin_n", B.H_UKN, 1), ("kelvin_s", B.H_UKS, 3), ("separation", B.H_SEP, 1),
+                ("overlap0", B.H_D0, 1))
 _EMPTY_I = np.zeros(0, np.int64)
 
 
@@ -108,7 +112,8 @@ class BondSet:
         order = np.lexsort((j, i))
         hist = np.zeros((len(i), B.N_HIST))
         for name, col, width in _HIST_FIELDS:
-            hist[:, col:col + width] = np.asarray(g[name], np.float64).reshape(len(i), width)
+            if name in g:  # (a state written before overlap0 existed holds loaded bonds: 0)
+                hist[:, col:col + width] = np.asarray(g[name], np.float64).reshape(len(i), width)
         out.start = np.searchsorted(i[order], np.arange(n_spheres + 1)).astype(np.int64)
         out.j = np.ascontiguousarray(j[order])
         out.model = np.ascontiguousarray(np.asarray(g["model"], np.int64)[order])
@@ -171,12 +176,18 @@ class BondSet:
                 self.prm = np.vstack([self.prm, row[None, :]])
                 self.materials = np.vstack([self.materials, np.array(pair, np.int64)[None, :]])
 
-    def bond_touching(self, xs, rad, smat, sbody, gap, fraction=1.0, rng=None):
+    def bond_touching(self, xs, rad, smat, sbody, gap, fraction=1.0, rng=None, stress_free=False):
         """Bond every pair of spheres of different bodies whose surfaces are closer than
         ``gap`` [m] and whose material pair has a model; pairs already bonded (intact or
         broken) stay as they are. ``fraction`` < 1 bonds only that share of them, drawn
         with ``rng`` (a numpy Generator); the others stay ordinary contacts (the seed-003
-        variant with frictional contacts). Returns the number of new bonds."""
+        variant with frictional contacts). Returns the number of new bonds.
+
+        ``stress_free``: a contact bond's reference overlap delta_0 is the pair's overlap
+        delta = r_i + r_j - d [m] now (negative for a gap), so it holds no force where it
+        is installed, F_n = k_n (delta - delta_0) (PFC's reference gap; a parallel bond is
+        always installed without force, its forces being increments). Otherwise delta_0 = 0
+        and the bond takes over the contact's force k_n delta (locked-in stress)."""
         from demcli.kernels.neighbors import build_pairs
 
         start, pi, pj = build_pairs(xs, rad, sbody, float(gap), max(64, 8 * len(rad)))
@@ -196,6 +207,9 @@ class BondSet:
             return 0
         hist = np.zeros((len(new), B.N_HIST))
         hist[:, B.H_SEP] = np.maximum(-delta[new], 0.0)
+        if stress_free:
+            cb = self.prm[model[new], B.B_KIND] == B.CONTACT_BOND
+            hist[:, B.H_D0] = np.where(cb, delta[new], 0.0)
         i = np.concatenate([old_i, pi[new]])
         j = np.concatenate([self.j, pj[new]])
         order = np.lexsort((j, i))

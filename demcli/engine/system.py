@@ -232,15 +232,16 @@ class System(BodySystem):
         self._bond_arrays = self.bonds.kernel_arrays()
 
     # ---- bonds ------------------------------------------------------------------------
-    def bond_touching(self, gap, fraction=1.0, rng=None):
+    def bond_touching(self, gap, fraction=1.0, rng=None, stress_free=False):
         """Bond every touching pair whose material pair has a bond model (surfaces closer
         than ``gap`` [m]), or a random ``fraction`` of them drawn with ``rng``; returns the
-        number of new bonds. The pair list is rebuilt."""
+        number of new bonds. The pair list is rebuilt. ``stress_free``: contact bonds hold
+        no force at their installed overlap (:meth:`BondSet.bond_touching`)."""
         if not self.plan.has("bonds"):
             raise ValueError("bonds are not an effect of this stage")
         from demcli.kernels.bonds import B_KIND, PARALLEL_BOND
 
-        n = self.bonds.bond_touching(self.xs, self.rad, self.smat, self.sbody, gap, fraction, rng)
+        n = self.bonds.bond_touching(self.xs, self.rad, self.smat, self.sbody, gap, fraction, rng, stress_free)
         self._bond_arrays = self.bonds.kernel_arrays()
         self._fresh_lists = True
         # contacts a bond now replaces are no longer contacts (the rebuilt list leaves them out)

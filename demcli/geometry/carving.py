@@ -327,6 +327,43 @@ def carve(lattice, label, centres, radii, normals, spacings, seed_ids, membershi
                       np.ascontiguousarray(seed_ids, np.int64)))
 
 
+def body_lattice(lo, hi, spacing):
+    """Lattice of balls of diameter ``spacing`` with a ball centred at the origin, covering
+    the box [lo, hi] (m): the nodes k spacing, k integer, inside it. A body carved in its
+    own frame (centroid at the origin) so always holds the ball at its centroid."""
+    lo = np.asarray(lo, float)
+    hi = np.asarray(hi, float)
+    k0 = np.ceil(lo / spacing - 1e-9)
+    k1 = np.floor(hi / spacing + 1e-9)
+    counts = np.maximum(k1 - k0 + 1, 0).astype(np.int64)
+    return Lattice(k0 * spacing, float(spacing), counts)
+
+
+def carve_polyhedron(normals, offsets, vertices, spacing, membership="centre"):
+    """Balls of a lattice of ``spacing`` (ball diameter, m) inside a convex polyhedron.
+
+    The polyhedron is {x: n_f . x <= d_f} (``normals`` (f, 3) outward unit, ``offsets``
+    (f,) m, ``vertices`` (v, 3) its corners), given in its body frame (centroid at the
+    origin: :func:`body_lattice` puts a ball there). Membership as in :func:`carve`: a
+    ball belongs when its centre (``"centre"``) or the whole ball (``"whole"``) is inside,
+    with a round-off allowance of 1e-9 spacing (lattice nodes on a face count as inside).
+    Returns (centres (n, 3) m in the body frame, the lattice); n = 0 only for ``"whole"``
+    when no ball fits.
+    """
+    normals = np.asarray(normals, float)
+    offsets = np.asarray(offsets, float)
+    vertices = np.asarray(vertices, float)
+    if membership not in ("centre", "whole"):
+        raise ValueError(f"membership must be 'centre' or 'whole', got {membership!r}")
+    shrink = 0.0 if membership == "centre" else 0.5 * spacing
+    lat = body_lattice(vertices.min(axis=0) + shrink, vertices.max(axis=0) - shrink, spacing)
+    if lat.size == 0:
+        return np.zeros((0, 3)), lat
+    pts = lat.centres()
+    inside = np.all(pts @ normals.T <= offsets - shrink + 1e-9 * spacing, axis=1)
+    return pts[inside], lat
+
+
 def members_by_label(label, n_labels):
     """CSR of lattice balls per label: (start (n_labels + 1,), ball indices), labels >= 0."""
     idx = np.flatnonzero(label >= 0)

@@ -11,7 +11,10 @@ at a_i = r_i - delta/2 from i's centre (delta = r_i + r_j - d, negative for a ga
 Models (``B_KIND`` of a model row, PFC's bond models; Potyondy & Cundall 2004):
 
 * ``CONTACT_BOND`` -- point springs replacing the contact while intact:
-  F_n = k_n delta (tension allowed), dF_s = -k_s v_t dt; breaks in tension when
+  F_n = k_n (delta - delta_0) (tension allowed), dF_s = -k_s v_t dt, with delta_0 [m] the
+  bond's reference overlap (``H_D0``): 0 for a bond installed loaded (it takes over the
+  contact's force k_n delta), the overlap at creation for one installed stress-free
+  (PFC's reference gap: zero force at the installed separation); breaks in tension when
   -F_n >= s_n and in shear when |F_s| >= s_s (strengths in N); force only, no moment.
   Once broken, the pair is an ordinary contact of the stage's contact law (linear with
   slip in the asphalt cases).
@@ -79,7 +82,8 @@ H_MB = 5       # bending moment on i [N m], 3 columns (parallel bond)
 H_UKN = 8      # Kelvin displacement, normal tension [m] (Burgers)
 H_UKS = 9      # Kelvin displacement, shear [m], 3 columns (Burgers)
 H_SEP = 12     # separation max(-delta, 0) at the last step [m] (Burgers)
-N_HIST = 13
+H_D0 = 13      # reference overlap delta_0 [m] (contact bond; 0: installed loaded)
+N_HIST = 14
 
 # state of a bond
 INTACT = 0
@@ -175,7 +179,8 @@ def bond_energy(p, hist, b, delta, ri, rj):
     kind = p[B_KIND]
     fs2 = hist[b, H_FS] ** 2 + hist[b, H_FS + 1] ** 2 + hist[b, H_FS + 2] ** 2
     if kind == CONTACT_BOND:
-        return 0.5 * p[B_KN] * delta * delta + 0.5 * fs2 / p[B_KS]
+        du = delta - hist[b, H_D0]
+        return 0.5 * p[B_KN] * du * du + 0.5 * fs2 / p[B_KS]
     if kind == PARALLEL_BOND:
         rb = p[B_LAMBDA] * min(ri, rj)
         area = math.pi * rb * rb
@@ -190,7 +195,7 @@ def bond_energy(p, hist, b, delta, ri, rj):
     return e + 0.5 * hist[b, H_FN] ** 2 / p[B_KMN] + 0.5 * p[B_KKN] * hist[b, H_UKN] ** 2
 
 
-@njit(inline="always")
+@njit
 def bond_law(p, hist, b, delta, nx, ny, nz, vx, vy, vz, wx, wy, wz, ri, rj, dt):
     """Force and moment on i from bond b; updates its history row in place.
 
@@ -217,7 +222,7 @@ def bond_law(p, hist, b, delta, nx, ny, nz, vx, vy, vz, wx, wy, wz, ri, rj, dt):
     e_diss = 0.0
     state = INTACT
     if kind == CONTACT_BOND:
-        fn = p[B_KN] * delta
+        fn = p[B_KN] * (delta - hist[b, H_D0])
         sx -= p[B_KS] * vtx * dt
         sy -= p[B_KS] * vty * dt
         sz -= p[B_KS] * vtz * dt

@@ -34,7 +34,8 @@ from demcli.kernels.contact import (HERTZ, P_CN, P_ESTAR, P_KN, P_ZETA, contact_
                                    strain_energy)
 from demcli.kernels.neighbors import build_pairs, build_reverse, build_wall_pairs, carry_history
 from demcli.kernels.walls import (FORCE, PRESSURE, SERVO, VELOCITY, W_AMPLITUDE, W_AREA, W_FREQ,
-                                  W_GAIN, W_MASS, W_RATE, W_TARGET, W_VMAX, wall_distance)
+                                  W_GAIN, W_MASS, W_PHASE, W_RATE, W_START, W_TARGET, W_VMAX, applied_force,
+                                  wall_distance)
 
 from demcli.kernels.layout import (C_BODY, C_BONDS, C_CHECK, C_DAMPING, C_ENERGY, C_FRICTION, C_GATHER,
                                    C_GRAVITY, C_KICK, C_MEMBERS, C_PAIRS, C_REBUILD, C_ROLLING,
@@ -574,7 +575,8 @@ def _wall_control(time, dt, wstart_n, wwall, wfc, wnormal, wv, wctrl, wprm, wfor
             wv[w, 2] = vn * nz
         elif mode == FORCE:
             # applied force pushes the wall into the domain (+n)
-            fa = wprm[w, W_TARGET] + wprm[w, W_AMPLITUDE] * math.sin(2.0 * math.pi * wprm[w, W_FREQ] * time)
+            fa = applied_force(wprm[w, W_TARGET], wprm[w, W_AMPLITUDE], wprm[w, W_FREQ], wprm[w, W_PHASE],
+                               wprm[w, W_START], time)
             fn = fa + wforce[w, 0] * nx + wforce[w, 1] * ny + wforce[w, 2] * nz
             vn = wv[w, 0] * nx + wv[w, 1] * ny + wv[w, 2] * nz + dt * fn / wprm[w, W_MASS]
             wv[w, 0] = vn * nx

@@ -22,7 +22,8 @@ SERVO = 3
 PRESSURE = 4       # cylinders: a membrane of mass W_MASS whose radius moves under the pressure W_TARGET
 
 # columns of wprm[w, :]
-W_TARGET = 0      # FORCE: applied force [N] along -normal; SERVO: target stress [Pa]; PRESSURE: [Pa]
+W_TARGET = 0      # FORCE: mean applied force [N] along +normal (into the domain); SERVO: target stress [Pa];
+                  # PRESSURE: [Pa]
 W_AMPLITUDE = 1   # FORCE: sinusoidal amplitude [N]
 W_FREQ = 2        # FORCE: frequency [Hz]
 W_MASS = 3        # FORCE, PRESSURE: wall mass [kg]
@@ -30,7 +31,18 @@ W_GAIN = 4        # SERVO: relaxation alpha in (0, 1]: gain G = alpha A / (sum (
 W_VMAX = 5        # SERVO: speed limit [m/s]
 W_AREA = 6        # SERVO, PRESSURE: loaded area [m^2]
 W_RATE = 7        # PRESSURE: rate of change of the radius [m/s]
-N_WPARAMS = 8
+W_PHASE = 8       # FORCE: phase of the sine at W_START [rad]
+W_START = 9       # FORCE: time the oscillation starts [s]; before it the force holds its value there
+N_WPARAMS = 10
+
+
+@njit(inline="always")
+def applied_force(target, amplitude, frequency, phase, start, time):
+    """FORCE walls: F(t) = target + amplitude sin(2 pi frequency max(t - start, 0) + phase) [N],
+    along the wall normal (into the domain); the load form of the polyhedral actors
+    (:mod:`demcli.engine.actors`), so that phase -pi/2 gives a haversine cycle from
+    target - amplitude held until ``start``."""
+    return target + amplitude * math.sin(2.0 * math.pi * frequency * max(time - start, 0.0) + phase)
 
 
 @njit(inline="always")

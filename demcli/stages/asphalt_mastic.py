@@ -7,7 +7,15 @@ Reads a cut specimen (``specimen`` and ``aggregates`` groups) and:
    each cell into *aggregate* (its centre inside an aggregate: in the lattice cell of one
    of its member balls, a cube of side 2 r_agg along the aggregate's lattice axes, which
    contains the ball) or *void* (the rest): the lattice points not inside any aggregate
-   member (ball or cell) are the mastic's candidate sites;
+   member (ball or cell) are the mastic's candidate sites. The lattice is cell-centred
+   on the specimen: along an axis of extent L (height; diameter or side) it holds
+   m = round(L / a) >= 1 centres c + (k - (m - 1)/2) a, k = 0 .. m - 1, so a box is
+   exactly m_x m_y m_z cells and a cylinder the cells of m_z layers whose centre is in the
+   disc (midpoint rule). The voxel extent m a is within a / 2 of L, equals it when L is
+   a whole number of cells, and its error has zero mean over L / a; no centre lies
+   within a / 4 of an end face, so no cell sits on a face to be counted twice or not at
+   all (a lattice of ceil(L / a) + 1 points, as before, put a layer of centres on both
+   end faces when L / a was whole, one layer too many: mastic mass 4-12 % high);
 2. one mastic ball stands for its cell (volume a^3, mass rho a^3, as an aggregate's
    member stands for its lattice cell), so the specimen is a three-phase voxel model at
    the mastic resolution: aggregate cells, mastic cells, air cells. The number of
@@ -257,6 +265,29 @@ def phase_table(state):
     return out
 
 
+def cell_centres(shape, centre, size, a):
+    """Centres (n, 3) [m] of the mastic-lattice cells (side ``a`` [m]) that tile a specimen
+    (``shape`` box or cylinder, ``centre`` and ``size`` (3,) [m], as the specimen group).
+
+    Along each axis of extent L the lattice holds m = round(L / a) >= 1 centres
+    c + (k - (m - 1)/2) a; the cells whose centre is inside the specimen count (midpoint
+    rule). n a^3 is then the specimen volume to the lattice's discretisation error: exact
+    for a box whose sides are whole numbers of cells, and the height of a cylinder is
+    exact when it is one; no centre lies within a / 4 of an end face (module docstring,
+    step 1).
+    """
+    from demcli.stages.asphalt_cut import inside
+
+    centre = np.asarray(centre, float)
+    size = np.asarray(size, float)
+    counts = np.maximum(np.floor(size / a + 0.5), 1).astype(np.int64)
+    origin = centre - 0.5 * (counts - 1) * a
+    axes = [origin[d] + a * np.arange(counts[d]) for d in range(3)]
+    gz, gy, gx = np.meshgrid(axes[2], axes[1], axes[0], indexing="ij")
+    pts = np.stack([gx.ravel(), gy.ravel(), gz.ravel()], axis=1)
+    return pts[inside(pts, 0.0, shape, centre, size)]
+
+
 def run(ctx, cfg, state_in):
     from scipy.spatial import cKDTree
 
@@ -279,13 +310,9 @@ def run(ctx, cfg, state_in):
     v_ball = a ** 3
     rho = ctx.case.materials[cfg.material].density
 
-    # the specimen tiled by mastic cells: aggregate cells and void cells
-    counts = np.ceil(size / a - 1e-9).astype(np.int64) + 1
-    origin = centre - 0.5 * (counts - 1) * a
-    axes = [origin[d] + a * np.arange(counts[d]) for d in range(3)]
-    gz, gy, gx = np.meshgrid(axes[2], axes[1], axes[0], indexing="ij")
-    pts = np.stack([gx.ravel(), gy.ravel(), gz.ravel()], axis=1)
-    pts = pts[inside(pts, 0.0, shape, centre, size)]
+    # the specimen tiled by mastic cells (cell-centred lattice, round(L / a) per axis): aggregate
+    # cells and void cells
+    pts = cell_centres(shape, centre, size, a)
     n_cells = len(pts)
     agg_c = state_in.sphere_centres()
     agg_r = np.asarray(state_in["spheres/radius"], float)

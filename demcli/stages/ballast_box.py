@@ -206,7 +206,9 @@ def cycle_timing(load, cycles, records_per_cycle, dt):
     rec = records_per_cycle
     spc = int(math.ceil(1.0 / (load.frequency * dt) / rec)) * rec
     dt = 1.0 / (load.frequency * spc)
-    settle = int(math.ceil(load.settle / dt / (spc // rec))) * (spc // rec)
+    # (the round-off allowance keeps a settle time of whole records, 0.05 s at 10 Hz, from
+    # growing by a record)
+    settle = int(math.ceil(load.settle / dt / (spc // rec) - 1e-9)) * (spc // rec)
     return dt, settle + cycles * spc, spc // rec
 
 

@@ -47,6 +47,7 @@ def load_stage_types():
     """Import every built-in stage module (registers them) and return the registry."""
     from demcli.stages import dem, generate, gradation  # noqa: F401
     from demcli.stages import assemble, ballast_box, ballast_library  # noqa: F401
+    from demcli.stages import ballast_clumps  # noqa: F401  (polyhedra as sphere clumps)
     from demcli.stages import discretize, polygons  # noqa: F401  (2D sections, seed 001)
     from demcli.stages import asphalt_carve, asphalt_compact, asphalt_place  # noqa: F401  (3D asphalt, seed 000)
     from demcli.stages import asphalt_cut, asphalt_mastic  # noqa: F401  (3D asphalt, seed 000)

@@ -51,8 +51,15 @@ MOTION = Tagged("mode", {
         "force": Float("N", doc="mean force pushing the wall into the domain"),
         "amplitude": Float("N", min=0, default=0.0),
         "frequency": Float("Hz", min=0, default=0.0),
+        "phase": Float("rad", default=0.0, doc="phase of the sine when it starts (-90 deg: a haversine cycle "
+                                               "from force - amplitude, as the ballast actors are loaded)"),
+        "start": Float("s", min=0, default=0.0, doc="stage time the sine starts; before it the force holds its "
+                                                    "value at the start"),
         "mass": Float("kg", min=0, min_inclusive=False),
-    }),
+        "weight": Bool(default=False, doc="add the wall's weight, mass x gravity along the normal "
+                                          "(needs physics.gravity)"),
+    }, doc="F(t) = force + amplitude sin(2 pi frequency max(t - start, 0) + phase) [+ weight], along the normal; "
+           "the wall, of the given mass, moves under it and the particles' push"),
 }, default={"mode": "fixed"}, doc="how the wall moves along its normal")
 
 FACES = ("x0", "x1", "y0", "y1", "z0", "z1")
@@ -62,6 +69,9 @@ WALL = Tagged("type", {
         "name": Str(default=None), "point": Vector(3, "m"), "normal": Vector(3, doc="into the domain"),
         "material": Str(), "motion": MOTION,
         "extent": Optional(Vector(6, "m"), doc="drawing bounds xmin ymin zmin xmax ymax zmax"),
+        "lay_on_particles": Optional(Float("m", min=0),
+                                     doc="at the stage start move the wall along its normal to this gap from the "
+                                         "nearest particle surface (a loading plate laid on the bed); not on resume"),
     }),
     "box": Section({
         "name": Str(default="box"), "min": Vector(3, "m"), "max": Vector(3, "m"), "material": Str(),
@@ -118,6 +128,10 @@ BONDS = Optional(Section({
                         "its contact and parallel bonds, and the linear + slip law of every phase pair"),
     "create": Bool(default=False, doc="bond every touching pair whose materials have a model at the stage start"),
     "gap": Float(min=0, default=1e-6, doc="pairs closer than gap x mean radius count as touching"),
+    "install": Str(choices=["auto", "stress_free", "loaded"], default="auto",
+                   doc="contact bonds created on an overlap: stress_free holds no force at the overlap of creation "
+                       "(F_n = k_n (delta - delta_0)), loaded takes over the contact's force k_n delta; auto: "
+                       "stress_free with from_phases (the mastic lattice's overlaps are voxel artefacts), else loaded"),
 }), doc="bonds between spheres (a state that holds bonds keeps them active without this key)")
 
 FIELDS = {
@@ -153,12 +167,17 @@ FIELDS = {
     }),
     "stop": Optional(Section({
         "kinetic_ratio": Float(min=0, min_inclusive=False,
-                               doc="stop when mean kinetic energy per body < ratio * m g d"),
+                               doc="stop when mean kinetic energy per body < ratio * m g d (m, d: mean body mass and "
+                                   "size; a clump's size is its bounding diameter)"),
         "min_time": Float("s", min=0, default=0.0),
     }), doc="stop early when the bed is at rest"),
     "output": Section({
         "records": Int(min=1, default=200, doc="record rows over the run"),
         "snapshots": Int(min=0, default=10, doc="VTU snapshots over the run (plus the first and last)"),
+        "checkpoint": Optional(Float("s", min=0, min_inclusive=False),
+                               doc="also write a checkpoint at the first record after every this much wall-clock "
+                                   "time (for runs longer than a job's time limit); `demcli run --resume` "
+                                   "continues from it bit-identically. Ctrl-C and SIGTERM always write one"),
     }, default={}),
     "neighbors": Section({"skin": Float(min=0, min_inclusive=False, default=0.3,
                                         doc="Verlet skin / mean radius")}, default={}),
@@ -218,6 +237,12 @@ def _check(node, report):
         report("scaling.mass", "must be a power of 2 (1, 2, 4, ..., 1024) so that scaling is exact", m)
     if node.stop is not None and node.physics.gravity is None:
         report("stop", "the kinetic-energy criterion needs gravity (it scales with m g d)", None)
+    for k, w in enumerate(node.walls):
+        motions = [(f"walls.{k}.motion.{face}", m) for face, m in w.motion.items()] if w.type == "box" else \
+            [(f"walls.{k}.motion", w.motion)]
+        for where, m in motions:
+            if m.mode == "force" and m.weight and node.physics.gravity is None:
+                report(f"{where}.weight", "the wall's weight needs physics.gravity", m.weight)
 
 
 def declared_effects(cfg, dimension):
@@ -345,6 +370,49 @@ def set_bond_models(ctx, bonds_cfg, system, groups=None):
     system.bonds.set_models(pairs, rows)
 
 
+def particle_support(groups, normal):
+    """min over the particles' points p of p . normal [m]: where a plane with this normal
+    (into the domain) first touches them (spheres and clumps: their surfaces; polyhedra:
+    their vertices; the loading actors of a ballast stage are left out). inf for none."""
+    n = np.asarray(normal, float)
+    if _is_polyhedral(groups):
+        from demcli.engine.actors import remove_actors
+        from demcli.state import State
+        from demcli.state.polyhedra import world_vertices
+
+        v, _ = world_vertices(State(groups=remove_actors(groups)))
+        return float((v @ n).min()) if len(v) else math.inf
+    s = groups["spheres"]
+    if not len(s["radius"]):
+        return math.inf
+    from demcli.state import State
+
+    c = State(groups={"bodies": groups["bodies"], "spheres": s}).sphere_centres()
+    return float((c @ n - np.asarray(s["radius"], float)).min())
+
+
+def lay_walls(cfg, wpoint, groups):
+    """Move the plane walls with ``lay_on_particles`` along their normals (in place on
+    ``wpoint``, the walls' points in :func:`build_walls` order) to that gap from the
+    particles of ``groups``; returns {wall row: (gap, shift along the normal) [m]}. Their drawing
+    extents follow (the engines draw a wall at its configured extent + its displacement)."""
+    out = {}
+    row = 0
+    for w in cfg.walls:
+        if w.type == "box":
+            row += sum(1 for face in FACES if face not in w.open)
+            continue
+        if w.type == "plane" and w.lay_on_particles is not None:
+            n = np.asarray(w.normal, float) / np.linalg.norm(w.normal)
+            low = particle_support(groups, n)
+            if math.isfinite(low):
+                d = low - w.lay_on_particles - float(wpoint[row] @ n)
+                wpoint[row] += d * n
+                out[row] = (w.lay_on_particles, d)
+        row += 1
+    return out
+
+
 def build_walls(cfg, case):
     """Walls of the stage config as arrays (box walls become up to six planes)."""
     from demcli.engine.system import Walls
@@ -376,7 +444,12 @@ def build_walls(cfg, case):
             prm[W.W_TARGET] = motion.force
             prm[W.W_AMPLITUDE] = motion.amplitude
             prm[W.W_FREQ] = motion.frequency
+            prm[W.W_PHASE] = motion.phase
+            prm[W.W_START] = motion.start
             prm[W.W_MASS] = motion.mass
+            if motion.weight:  # a constant force: the weight's component along the normal
+                g = np.asarray(cfg.physics.gravity, float)
+                prm[W.W_TARGET] += motion.mass * float(g @ (np.asarray(normal, float) / np.linalg.norm(normal)))
         n = np.asarray(normal, float)
         rows.append((name, kind, np.asarray(point, float), n / np.linalg.norm(n), radius, names.index(material),
                      control, prm, v, np.asarray(extent, float)))
@@ -474,7 +547,8 @@ def make_system(ctx, cfg, groups, time=0.0, step=0, resume=False):
     if cfg.get("bonds") is not None:
         set_bond_models(ctx, cfg.bonds, system, groups)
         if cfg.bonds.create and not resume:
-            n = system.bond_touching(cfg.bonds.gap * float(system.rad.mean()))
+            free = cfg.bonds.install == "stress_free" or (cfg.bonds.install == "auto" and cfg.bonds.from_phases)
+            n = system.bond_touching(cfg.bonds.gap * float(system.rad.mean()), stress_free=free)
             ctx.log(f"bonded {n} touching pairs ({len(system.bonds)} bonds)")
     dt_crit = system.critical_dt()
     if cfg.time.dt is not None:
@@ -485,6 +559,10 @@ def make_system(ctx, cfg, groups, time=0.0, step=0, resume=False):
     else:
         dt = cfg.time.dt_factor * dt_crit
     system.dt = dt
+    if not resume:  # a resumed stage takes its walls' positions from the checkpoint
+        for row, (gap, d) in lay_walls(cfg, system.wpoint, groups).items():
+            ctx.log(f"wall {walls.name[row]} laid {gap * 1e3:g} mm from the particles "
+                    f"(moved {d * 1e3:+.4g} mm along its normal)")
     return system, plan, dt, dt_crit
 
 
@@ -519,6 +597,16 @@ class _Snapshots:
             self.bodies.series.truncate(time)
             self.walls.truncate(time)
             self.bodies.count = len(self.bodies.series)
+
+
+def body_radii(system):
+    """Bounding radius of each body [m]: a sphere's radius, a clump's max |offset| + r, a
+    polyhedron's circumradius (the size d in the stop criterion's m g d)."""
+    if not getattr(system, "clumps", False):
+        return system.rad
+    out = np.zeros(len(system.mass))
+    np.maximum.at(out, system.sbody, np.linalg.norm(system.soff, axis=1) + system.rad)
+    return out
 
 
 def reference_energy(system):
@@ -642,7 +730,7 @@ def integrate(ctx, cfg, state_in, hooks=None):
     if ckpt is not None:
         snaps.truncate(system.time)
     nb = len(system.mass)
-    d_mean = 2.0 * float(system.rad.mean())
+    d_mean = 2.0 * float(body_radii(system).mean())
     g = float(np.linalg.norm(system.gravity))
     e_unit = float(system.mass.mean()) * g * d_mean
 
@@ -675,11 +763,29 @@ def integrate(ctx, cfg, state_in, hooks=None):
     def snapshot():
         snaps.write(ctx.state_from(system, plan, extra=None))
 
+    def checkpoint():
+        """Write the checkpoint of the current state, which must be right after a record."""
+        extra = {"checkpoint": {
+            "losses0": np.array([system.losses0[k] for k in ("damping", "friction", "body_damping", "wall_work")]),
+            "esph": system.esph.copy(), "ebody": system.ebody.copy(), "eacc": system.eacc.copy(),
+            "ke_limit": np.array([system.ke_limit])}}
+        if len(system.walls):
+            from demcli.kernels.walls import W_RATE
+
+            extra["checkpoint"]["wall_rate"] = system.walls.prm[:, W_RATE].copy()
+        st = ctx.state_from(system, plan, extra=extra)
+        table.to_state(st)
+        if wtable is not None:
+            wtable.to_state(st)
+        return ctx.write_checkpoint(st)
+
     if ckpt is None:
         record()
         if snap_every:
             snapshot()
     last_good = system.snapshot()
+    ckpt_every = cfg.output.checkpoint
+    ckpt_t = _time.perf_counter()
     start_step = system.step
     t0 = _time.perf_counter()
     progress = ctx.progress(total, start_step)
@@ -701,6 +807,9 @@ def integrate(ctx, cfg, state_in, hooks=None):
             if system.step % rec_every == 0 or system.step == total:
                 row = record()
                 last_good = system.snapshot()
+                if ckpt_every is not None and _time.perf_counter() - ckpt_t >= ckpt_every and system.step < total:
+                    checkpoint()
+                    ckpt_t = _time.perf_counter()
                 if cfg.stop is not None and system.time >= cfg.stop.min_time and \
                         row["kinetic"] / max(nb, 1) < cfg.stop.kinetic_ratio * e_unit:
                     stopped = f"at rest (kinetic ratio < {cfg.stop.kinetic_ratio:g}) at t = {system.time:.4g} s"
@@ -714,19 +823,7 @@ def integrate(ctx, cfg, state_in, hooks=None):
             progress.update(system.step)
     except KeyboardInterrupt:
         system.restore(last_good)
-        extra = {"checkpoint": {
-            "losses0": np.array([system.losses0[k] for k in ("damping", "friction", "body_damping", "wall_work")]),
-            "esph": system.esph.copy(), "ebody": system.ebody.copy(), "eacc": system.eacc.copy(),
-            "ke_limit": np.array([system.ke_limit])}}
-        if len(system.walls):
-            from demcli.kernels.walls import W_RATE
-
-            extra["checkpoint"]["wall_rate"] = system.walls.prm[:, W_RATE].copy()
-        st = ctx.state_from(system, plan, extra=extra)
-        table.to_state(st)  # rows end at the last good step, which was taken right after a record
-        if wtable is not None:
-            wtable.to_state(st)
-        path = ctx.write_checkpoint(st)
+        path = checkpoint()  # rows end at the last good step, which was taken right after a record
         progress.close()
         raise StageError(f"stage {ctx.name} interrupted at step {system.step}; continue with --resume",
                          state_file=path) from None

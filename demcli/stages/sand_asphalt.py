@@ -347,12 +347,12 @@ def run_creep(ctx, cfg, state_in):
         0.01 * float(np.sum(state_in.groups["bodies"]["mass"])) * cfg.scaling.mass
 
     walls = [Node({"type": "plane", "name": "bottom", "point": tuple(base), "normal": (0.0, 0.0, 1.0),
-                   "material": cfg.platen_material, "motion": None,
+                   "material": cfg.platen_material, "motion": None, "lay_on_particles": None,
                    "extent": tuple(np.r_[base - [R0, R0, 0], base + [R0, R0, 0]])}),
              Node({"type": "plane", "name": "top", "point": tuple(base + [0, 0, H0]), "normal": (0.0, 0.0, -1.0),
-                   "material": cfg.platen_material,
+                   "material": cfg.platen_material, "lay_on_particles": None,
                    "motion": Node({"mode": "force", "force": s1 * area, "amplitude": 0.0, "frequency": 0.0,
-                                   "mass": mload}),
+                                   "phase": 0.0, "start": 0.0, "mass": mload, "weight": False}),
                    "extent": tuple(np.r_[base + [-R0, -R0, H0], base + [R0, R0, H0]])})]
     if s3 > 0:
         walls.append(Node({"type": "cylinder", "name": "membrane", "base": tuple(base), "axis": (0.0, 0.0, 1.0),

@@ -1,6 +1,9 @@
 """Wall geometry and wall control: cylinder contact, prescribed velocity, force and servo stress."""
 
+import math
+
 import numpy as np
+import pytest
 
 from demcli.engine.system import Walls
 from demcli.kernels import walls as W
@@ -65,6 +68,56 @@ def test_force_controlled_wall_accelerates_as_a_free_mass(build):
     t = 1.0
     assert abs(s.wpoint[0, 2] - 0.5 * 5.0 * t * t) < 5.0 * s.dt * t
     assert abs(s.wv[0, 2] - 5.0 * t) < 1e-9
+
+
+def test_force_controlled_wall_follows_a_haversine_load_as_a_free_mass(build):
+    # Given a free wall of mass M = 2 kg loaded as the ballast plate is: F_min held until t0,
+    # then F(t) = F_mean + A sin(2 pi f (t - t0) - pi/2), a haversine F_min -> F_max -> F_min
+    M, f_min, f_max, f, t0 = 2.0, 2.0, 10.0, 2.0, 0.1
+    f0, amp, om = 0.5 * (f_min + f_max), 0.5 * (f_max - f_min), 2 * math.pi * f
+    wall = one_wall(W.PLANE, (0, 0, 0), (0, 0, 1), control=W.FORCE, W_TARGET=f0, W_AMPLITUDE=amp, W_FREQ=f,
+                    W_PHASE=-0.5 * math.pi, W_START=t0, W_MASS=M)
+    s = build.sphere_system([[0, 0, 10.0]], [[0, 0, 0]], 0.01, [build.Material("m", 2500.0)],
+                            build.ContactModel(law="linear", kn=1e4, kt=0.0), walls=wall)
+    s.dt = 1e-4
+
+    def exact(t):
+        """x(t), v(t) of M under F(t), from rest at 0."""
+        if t <= t0:
+            return f_min * t * t / (2 * M), f_min * t / M
+        x0, v0, tau = f_min * t0 * t0 / (2 * M), f_min * t0 / M, t - t0
+        v = v0 + (f0 * tau - amp * math.sin(om * tau) / om) / M
+        x = x0 + v0 * tau + (0.5 * f0 * tau * tau - amp * (1 - math.cos(om * tau)) / om ** 2) / M
+        return x, v
+
+    # When it moves for 1.1 s (two load cycles after t0), checked every 0.05 s
+    for k in range(22):
+        s.advance(500)
+        t = s.time
+        x, v = exact(t)
+        # Then it follows x(t) and v(t) from F(t)/M to the first-order error of the symplectic
+        # Euler step (|F|max / M dt t)
+        assert abs(s.wpoint[0, 2] - x) < f_max / M * s.dt * t, t
+        assert abs(s.wv[0, 2] - v) < f_max / M * s.dt, t
+
+
+def test_force_wall_weight_phase_and_start_come_from_the_case():
+    # Given the plate of the clump smoke case: 3.25 +- 3.25 kN from -90 deg after 2 ms, 10.5 kg, weight on
+    from pathlib import Path
+
+    from demcli.config.case import load_case
+    from demcli.stages import dem
+
+    case = load_case(Path(__file__).resolve().parents[2] / "cases" / "smoke" / "ballast_clumps.yaml")
+    cfg = next(c for c in case.stages if c.name == "plate")
+    walls = dem.build_walls(cfg, case)
+    k = walls.name.index("plate")
+    # Then the wall's mean force holds its weight M g along its normal (-z, with gravity)
+    prm = walls.prm[k]
+    assert walls.control[k] == W.FORCE
+    assert prm[W.W_TARGET] == pytest.approx(3250.0 + 10.5 * 9.81, rel=1e-12)
+    assert (prm[W.W_AMPLITUDE], prm[W.W_FREQ], prm[W.W_MASS]) == (3250.0, 10.0, 10.5)
+    assert prm[W.W_PHASE] == pytest.approx(-0.5 * math.pi, rel=1e-12) and prm[W.W_START] == pytest.approx(0.002)
 
 
 def test_servo_lid_holds_the_target_stress(build):

@@ -110,6 +110,11 @@ def test_cycle_timing_gives_whole_cycles_of_whole_records():
     assert dt <= 3.3e-5 and dt * spc * 10.0 == pytest.approx(1.0, rel=1e-14)
     settle = total - 7 * spc
     assert settle % rec == 0 and settle * dt >= 0.013 and (settle - rec) * dt < 0.013
+    # and a settle time of whole records stays that long (0.05 s = 2 records of 0.025 s)
+    for dt_asked in (3.975e-06, 1e-5, 3.3e-5):
+        load = Node({"frequency": 10.0, "settle": 0.05, "min": 0.0, "max": 1.0})
+        dt, total, rec = cycle_timing(load, cycles=3, records_per_cycle=4, dt=dt_asked)
+        assert (total - 3 * 4 * rec) == 2 * rec
 
 
 def test_bed_measures_and_surface_height_of_a_known_layer():
