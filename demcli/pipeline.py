@@ -34,7 +34,10 @@ class StageResult:
 
 
 class Progress:
-    """Progress with rate and ETA on stderr: a live line on a terminal, else every 10 %."""
+    """Progress with rate and ETA on stderr: a live line on a terminal, else a line every 10 %
+    and at least every ``LOG_EVERY`` seconds (a batch job's log of a long stage)."""
+
+    LOG_EVERY = 60.0
 
     def __init__(self, label, total, start, quiet, nparticles):
         self.label, self.total, self.start, self.quiet, self.np = label, total, start, quiet, nparticles
@@ -58,8 +61,10 @@ class Progress:
                 sys.stderr.write("\r" + text)
                 sys.stderr.flush()
                 self.last_print = now
-        elif 100 * frac >= self.next_pct:
+        elif 100 * frac >= self.next_pct or now - self.last_print >= self.LOG_EVERY:
             sys.stderr.write(text + "\n")
+            sys.stderr.flush()
+            self.last_print = now
             self.next_pct = (int(100 * frac) // 10 + 1) * 10
 
     def close(self):

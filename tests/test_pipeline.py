@@ -226,3 +226,26 @@ def test_undeclared_effects_allocate_nothing_and_run_no_pass(tmp_path):
     # and the plan lists no pass or array for them
     assert not any(p.startswith(("pairs:tangential", "pairs:rolling", "walls:")) for p in plan.passes)
     assert not any(f[0] in ("contact_ft", "contact_mr", "pair_losses") for f in plan.fields)
+
+
+def test_progress_in_a_log_every_tenth_and_every_minute(capsys, monkeypatch):
+    # Given progress written to a log (not a terminal) over 1000 steps
+    from demcli import pipeline
+
+    clock = {"t": 0.0}
+    monkeypatch.setattr(pipeline._time, "perf_counter", lambda: clock["t"])
+    p = pipeline.Progress("settle", 1000, 0, False, 10)
+    # When steps come slowly (1 step per 10 s: 10 % takes 1000 s)
+    for step in range(1, 30):
+        clock["t"] = 10.0 * step
+        p.update(step)
+    lines = capsys.readouterr().err.splitlines()
+    # Then a line comes every LOG_EVERY (60 s) though no 10 % mark is passed, with rate and ETA
+    assert len(lines) == 29 * 10 // 60
+    assert "step 6/1000" in lines[0] and "particle-steps/s" in lines[0] and "ETA" in lines[0]
+    # and every 10 % when steps come fast
+    p = pipeline.Progress("settle", 1000, 0, False, 10)
+    for step in range(1, 1001):
+        clock["t"] += 1e-3
+        p.update(step)
+    assert len(capsys.readouterr().err.splitlines()) == 10
