@@ -37,7 +37,6 @@ from demcli.engine.clumps import union_mass_properties
 from demcli.engine.materials import ContactModel, Material
 from demcli.engine.plan import make_plan
 from demcli.engine.system import Dynamics, System, Walls
-from demcli.kernels.walls import N_WPARAMS
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 PEERS_DIR = os.environ.get("DEMCLI_PEERS") or os.path.normpath(os.path.join(HERE, "..", "..", "shared", "peers"))
@@ -117,12 +116,7 @@ def make_system(nc=500, skin=0.3, mass="union", resolution=32, peers_dir=None):
         "spheres": {"body": sbody, "offset": soff, "radius": np.full(ns, r), "material": np.zeros(ns, np.int64)}}
     lx = ly = p["L"]
     lz = p["H"]
-    pts = [(0, 0, 0), (lx, 0, 0), (0, 0, 0), (0, ly, 0), (0, 0, 0), (0, 0, lz)]
-    nrm = [(1, 0, 0), (-1, 0, 0), (0, 1, 0), (0, -1, 0), (0, 0, 1), (0, 0, -1)]
-    walls = Walls(name=["x0", "x1", "y0", "y1", "z0", "z1"], kind=np.zeros(6, np.int8), point=np.array(pts, float),
-                  normal=np.array(nrm, float), radius=np.zeros(6), v=np.zeros((6, 3)), material=np.zeros(6, np.int64),
-                  control=np.zeros(6, np.int8), prm=np.zeros((6, N_WPARAMS)),
-                  extent=np.tile([0, 0, 0, lx, ly, lz], (6, 1)).astype(float))
+    walls = Walls.box_faces((lx, ly, lz))
     model = ContactModel(law="linear", kn=ds.KN, kt=ds.KT, cn=ds.CN)
     mats = [Material("clump", rho, friction=ds.MU)]
     plan = make_plan(["gravity", "friction"], clumps=True, walls=True)

@@ -11,7 +11,6 @@ import numpy as np
 from demcli.engine.materials import ContactModel, Material
 from demcli.engine.plan import make_plan
 from demcli.engine.system import Dynamics, System, Walls
-from demcli.kernels.walls import N_WPARAMS
 
 D = 2.0e-3
 RHO = 2650.0
@@ -48,12 +47,7 @@ def make_system(n, variant="dense", skin=0.3):
                    "id": idx.astype(np.int64)},
         "spheres": {"body": idx.astype(np.int64), "offset": np.zeros((n, 3)), "radius": np.full(n, D / 2),
                     "material": np.zeros(n, np.int64)}}
-    pts = [(0, 0, 0), (lx, 0, 0), (0, 0, 0), (0, ly, 0), (0, 0, 0), (0, 0, lz)]
-    nrm = [(1, 0, 0), (-1, 0, 0), (0, 1, 0), (0, -1, 0), (0, 0, 1), (0, 0, -1)]
-    walls = Walls(name=["x0", "x1", "y0", "y1", "z0", "z1"], kind=np.zeros(6, np.int8), point=np.array(pts, float),
-                  normal=np.array(nrm, float), radius=np.zeros(6), v=np.zeros((6, 3)), material=np.zeros(6, np.int64),
-                  control=np.zeros(6, np.int8), prm=np.zeros((6, N_WPARAMS)),
-                  extent=np.tile([0, 0, 0, lx, ly, lz], (6, 1)).astype(float))
+    walls = Walls.box_faces((lx, ly, lz))
     model = ContactModel(law="linear", kn=KN, kt=KN / 4, cn=cn)
     mats = [Material("glass", RHO, friction=0.5)]
     plan = make_plan(["gravity", "friction"], walls=True)

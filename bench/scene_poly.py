@@ -112,7 +112,6 @@ def build(n=500, seed=2024, young=YOUNG):
     from demcli.engine.poly_system import polyhedra_groups
     from demcli.engine.system import Walls
     from demcli.engine.materials import Material
-    from demcli.kernels.walls import N_WPARAMS
 
     rng = np.random.RandomState(seed)
     polys = [random_yade_polyhedron(rng.uniform(SIZE_MIN, SIZE_MAX, 3), k + 1) for k in range(n)]
@@ -124,12 +123,7 @@ def build(n=500, seed=2024, young=YOUNG):
     k = np.arange(n)
     x = np.stack([(k % nx + 0.5) * sp, ((k // nx) % nx + 0.5) * sp, (k // (nx * nx) + 0.5) * sp], axis=1)
     groups = polyhedra_groups(polys, RHO, x=x)
-    pts = [(0, 0, 0), (lx, 0, 0), (0, 0, 0), (0, lx, 0), (0, 0, 0), (0, 0, h)]
-    nrm = [(1, 0, 0), (-1, 0, 0), (0, 1, 0), (0, -1, 0), (0, 0, 1), (0, 0, -1)]
-    walls = Walls(name=["x0", "x1", "y0", "y1", "z0", "z1"], kind=np.zeros(6, np.int8), point=np.array(pts, float),
-                  normal=np.array(nrm, float), radius=np.zeros(6), v=np.zeros((6, 3)), material=np.zeros(6, np.int64),
-                  control=np.zeros(6, np.int8), prm=np.zeros((6, N_WPARAMS)),
-                  extent=np.tile([0, 0, 0, lx, lx, h], (6, 1)).astype(float))
+    walls = Walls.box_faces((lx, lx, h))
     mats = [Material("rock", RHO, young=young, friction=FRICTION)]
     return groups, walls, mats, (lx, lx, h), rcirc
 

@@ -52,6 +52,17 @@ class Walls:
                    control=np.zeros(k, np.int8), prm=np.zeros((k, N_WPARAMS)),
                    extent=np.tile([-1.0, -1.0, -1.0, 1.0, 1.0, 1.0], (k, 1)))
 
+    @classmethod
+    def box_faces(cls, hi, material=0):
+        """The six fixed inner faces of the box [0, hi] [m] (names x0, x1, y0, y1, z0, z1;
+        normals into the box), drawn over the box."""
+        lx, ly, lz = (float(c) for c in hi)
+        walls = cls.fixed_planes([(0, 0, 0), (lx, 0, 0), (0, 0, 0), (0, ly, 0), (0, 0, 0), (0, 0, lz)],
+                                 [(1, 0, 0), (-1, 0, 0), (0, 1, 0), (0, -1, 0), (0, 0, 1), (0, 0, -1)], material)
+        walls.name[:] = ["x0", "x1", "y0", "y1", "z0", "z1"]
+        walls.extent[:] = [0.0, 0.0, 0.0, lx, ly, lz]
+        return walls
+
 
 @dataclass(frozen=True)
 class Dynamics:
