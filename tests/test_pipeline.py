@@ -77,18 +77,20 @@ def _raise_at_chunk(monkeypatch, exc, k):
     return lambda: monkeypatch.setattr(system_mod.System, "advance", real)
 
 
-def test_interrupted_and_resumed_equals_uninterrupted(smoke_case, tmp_path, monkeypatch, h5_differences):
+@pytest.mark.parametrize("records, k", [(20, 12), (2, 3)])  # (2, 3): before the first record after step 0
+def test_interrupted_and_resumed_equals_uninterrupted(smoke_case, tmp_path, monkeypatch, h5_differences, records, k):
     # Given an uninterrupted reference run
-    run_case(smoke_case, out=tmp_path / "ref", quiet=True)
+    overrides = [f"stages.settle.output.records={records}"]
+    run_case(smoke_case, out=tmp_path / "ref", quiet=True, overrides=overrides)
     # When a run is interrupted (Ctrl-C) in the middle of the dem stage
-    restore = _raise_at_chunk(monkeypatch, KeyboardInterrupt, 12)
-    with pytest.raises(StageError, match="interrupted"):
-        run_case(smoke_case, out=tmp_path / "run", quiet=True)
+    restore = _raise_at_chunk(monkeypatch, KeyboardInterrupt, k)
+    with pytest.raises(StageError, match=f"interrupted at step {0 if records == 2 else ''}"):
+        run_case(smoke_case, out=tmp_path / "run", quiet=True, overrides=overrides)
     assert (tmp_path / "run" / "01-settle.ckpt.h5").exists()
     assert not (tmp_path / "run" / "01-settle.h5").exists()
     # and resumed
     restore()
-    res = run_case(smoke_case, out=tmp_path / "run", quiet=True, resume=True)
+    res = run_case(smoke_case, out=tmp_path / "run", quiet=True, resume=True, overrides=overrides)
     # Then the first stage is skipped, the checkpoint is gone, and the result is bit-identical
     assert [r.skipped for r in res] == [True, False]
     assert not (tmp_path / "run" / "01-settle.ckpt.h5").exists()
@@ -120,31 +122,51 @@ def test_periodic_checkpoint_survives_a_hard_stop(smoke_case, tmp_path, monkeypa
     assert h5_differences(tmp_path / "ref" / "01-settle.h5", tmp_path / "run" / "01-settle.h5") == []
 
 
-def test_sigterm_writes_a_checkpoint(smoke_case, tmp_path, h5_differences):
+_LONG = ["--set", "stages.settle.time.steps=100000", "--set", "stages.settle.output.records=2",
+         "--set", "stages.settle.output.snapshots=0"]  # chunks of ~0.5 s (a record every 50 000 steps)
+
+
+@pytest.mark.parametrize("sig, when", [("SIGTERM", "between"), ("SIGTERM", "during"), ("SIGINT", "during")])
+def test_signal_writes_a_checkpoint(smoke_case, tmp_path, h5_differences, sig, when):
     # Given an uninterrupted reference run
-    run_case(smoke_case, out=tmp_path / "ref", quiet=True)
-    # When `demcli run` gets SIGTERM (a batch system's time limit) in the middle of the dem stage
+    overrides = [v for v in _LONG if v != "--set"]
+    run_case(smoke_case, out=tmp_path / "ref", quiet=True, overrides=overrides)
+    # When `demcli run` gets SIGTERM (a batch system's time limit) or SIGINT (Ctrl-C) in the middle
+    # of the dem stage: between two chunks, or while a compiled chunk runs (a process outside
+    # sends it 0.2 s into a ~0.5 s chunk)
     script = f"""
-import os, signal, sys
+import os, signal, subprocess, sys, time
 from demcli.engine import system as system_mod
 from demcli.cli import main
 real = system_mod.System.advance
 calls = [0]
 def advance(self, n):
     calls[0] += 1
-    if calls[0] == 12:
-        os.kill(os.getpid(), signal.SIGTERM)
-    return real(self, n)
+    if calls[0] != 3:
+        return real(self, n)
+    if {when!r} == "between":
+        os.kill(os.getpid(), signal.{sig})
+        return real(self, n)
+    killer = subprocess.Popen(["sh", "-c", "sleep 0.2; kill -{sig[3:]} {{}}".format(os.getpid())])
+    t0 = time.perf_counter()
+    out = real(self, n)
+    if killer.poll() is not None and time.perf_counter() - t0 > 0.2:
+        print("signal arrived during the chunk", file=sys.stderr)
+    killer.wait()
+    return out
 system_mod.System.advance = advance
-main(["run", {str(smoke_case)!r}, "--out", {str(tmp_path / "run")!r}, "--quiet", "--threads", "1"])
+main(["run", {str(smoke_case)!r}, "--out", {str(tmp_path / "run")!r}, "--quiet", "--threads", "1", *{_LONG!r}])
 """
     proc = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=300)
-    # Then it stops with a message (no traceback) and leaves the checkpoint
+    # Then (the signal having come when meant) it stops with a message, no traceback, and
+    # leaves the checkpoint
+    if when == "during":
+        assert "signal arrived during the chunk" in proc.stderr
     assert proc.returncode != 0
-    assert "interrupted" in proc.stderr and "--resume" in proc.stderr and "Traceback" not in proc.stderr
+    assert "interrupted" in proc.stderr and "--resume" in proc.stderr and "Traceback" not in proc.stderr, proc.stderr
     assert (tmp_path / "run" / "01-settle.ckpt.h5").exists()
     # and --resume finishes it bit-identically
-    run_case(smoke_case, out=tmp_path / "run", quiet=True, resume=True)
+    run_case(smoke_case, out=tmp_path / "run", quiet=True, resume=True, overrides=overrides)
     assert h5_differences(tmp_path / "ref" / "01-settle.h5", tmp_path / "run" / "01-settle.h5") == []
 
 

@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from demcli.config.schema import Bool, Float, Int, List, Map, Optional, Section, Str, Tagged, Vector
+from demcli import interrupts
 from demcli.errors import InputError, StageError, StateError
 from demcli.stages.base import StageType, register_stage
 from demcli.state.fields import Field, register, register_group
@@ -780,6 +781,10 @@ def integrate(ctx, cfg, state_in, hooks=None):
         return ctx.write_checkpoint(st)
 
     if ckpt is None:
+        # loads at x_0 before the first record: a checkpoint taken at step 0 then holds them too
+        status, _ = system.advance(0)
+        if status != K.OK:
+            ctx.fail(_diagnosis(ctx, system, status, dt, dt_crit, cfg), system, plan, system.snapshot())
         record()
         if snap_every:
             snapshot()
@@ -792,35 +797,37 @@ def integrate(ctx, cfg, state_in, hooks=None):
     chunk = min(rec_every, 200)
     stopped = None
     try:
-        while system.step < total:
-            nxt = min(total, (system.step // rec_every + 1) * rec_every)
-            if snap_every:
-                nxt = min(nxt, (system.step // snap_every + 1) * snap_every)
-            n = min(chunk, nxt - system.step)
-            c0 = _time.perf_counter()
-            status, done = system.advance(n)
-            elapsed = _time.perf_counter() - c0
-            if status != K.OK:
-                ctx.fail(_diagnosis(ctx, system, status, dt, dt_crit, cfg), system, plan, last_good)
-            # chunks of about 0.5 s keep Ctrl-C and progress responsive; physics does not depend on them
-            chunk = max(1, min(rec_every, int(n * 0.5 / max(elapsed, 1e-6))))
-            if system.step % rec_every == 0 or system.step == total:
-                row = record()
-                last_good = system.snapshot()
-                if ckpt_every is not None and _time.perf_counter() - ckpt_t >= ckpt_every and system.step < total:
-                    checkpoint()
-                    ckpt_t = _time.perf_counter()
-                if cfg.stop is not None and system.time >= cfg.stop.min_time and \
-                        row["kinetic"] / max(nb, 1) < cfg.stop.kinetic_ratio * e_unit:
-                    stopped = f"at rest (kinetic ratio < {cfg.stop.kinetic_ratio:g}) at t = {system.time:.4g} s"
-                    break
-                if hooks.stop is not None:
-                    stopped = hooks.stop(system, row)
-                    if stopped:
+        with interrupts.deferred() as poll:  # Ctrl-C and SIGTERM act between chunks
+            while system.step < total:
+                nxt = min(total, (system.step // rec_every + 1) * rec_every)
+                if snap_every:
+                    nxt = min(nxt, (system.step // snap_every + 1) * snap_every)
+                n = min(chunk, nxt - system.step)
+                c0 = _time.perf_counter()
+                status, done = system.advance(n)
+                elapsed = _time.perf_counter() - c0
+                if status != K.OK:
+                    ctx.fail(_diagnosis(ctx, system, status, dt, dt_crit, cfg), system, plan, last_good)
+                # chunks of about 0.5 s keep Ctrl-C and progress responsive; physics does not depend on them
+                chunk = max(1, min(rec_every, int(n * 0.5 / max(elapsed, 1e-6))))
+                if system.step % rec_every == 0 or system.step == total:
+                    row = record()
+                    last_good = system.snapshot()
+                    if ckpt_every is not None and _time.perf_counter() - ckpt_t >= ckpt_every and system.step < total:
+                        checkpoint()
+                        ckpt_t = _time.perf_counter()
+                    if cfg.stop is not None and system.time >= cfg.stop.min_time and \
+                            row["kinetic"] / max(nb, 1) < cfg.stop.kinetic_ratio * e_unit:
+                        stopped = f"at rest (kinetic ratio < {cfg.stop.kinetic_ratio:g}) at t = {system.time:.4g} s"
                         break
-            if snap_every and system.step % snap_every == 0 and system.step < total:
-                snapshot()
-            progress.update(system.step)
+                    if hooks.stop is not None:
+                        stopped = hooks.stop(system, row)
+                        if stopped:
+                            break
+                if snap_every and system.step % snap_every == 0 and system.step < total:
+                    snapshot()
+                progress.update(system.step)
+                poll()
     except KeyboardInterrupt:
         system.restore(last_good)
         path = checkpoint()  # rows end at the last good step, which was taken right after a record

@@ -34,6 +34,7 @@ import math
 
 import numpy as np
 
+from demcli import interrupts
 from demcli.config.schema import Float, Int, List, Optional, Section, Str, Tagged
 from demcli.errors import InputError, StageError
 from demcli.stages import dem
@@ -189,14 +190,16 @@ def run_prepare(ctx, cfg, state_in):
 
     def cycle(max_steps):
         done = 0
-        while done < max_steps:
-            status, k = system.advance(min(200, max_steps - done))
-            if status != K.OK:
-                raise StageError(f"stage {ctx.name}: packing went unstable ({K.STATUS_TEXT[status]}) at step "
-                                 f"{system.step}; lower dt_factor or kn")
-            done += k
-            if _unbalanced(system) < eq.ratio:
-                break
+        with interrupts.deferred() as poll:  # Ctrl-C and SIGTERM act between chunks, not inside one
+            while done < max_steps:
+                status, k = system.advance(min(200, max_steps - done))
+                if status != K.OK:
+                    raise StageError(f"stage {ctx.name}: packing went unstable ({K.STATUS_TEXT[status]}) at step "
+                                     f"{system.step}; lower dt_factor or kn")
+                done += k
+                if _unbalanced(system) < eq.ratio:
+                    break
+                poll()
         return done
 
     def measures():
