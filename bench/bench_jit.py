@@ -10,7 +10,9 @@ a digest-named folder under it):
 * warm: the same command again, the kernels load from the cache the cold run filled.
 
 Both are whole-process wall times (interpreter start, imports, every stage, output files),
-as a user sees them. ``cold - warm`` is the compile cost. The time-stepping loops of the
+as a user sees them, and the CPU seconds of the same process (user + system): on a machine
+that other jobs share, the wall time also counts waits for a core, the CPU time does not.
+``cold - warm`` is the compile cost. The time-stepping loops of the
 dem stages (the "N steps in X s" log lines) are listed apart: that part is the case's
 own work, not start-up. The issue's targets: cold under 60 s, warm under 3 s.
 
@@ -24,6 +26,7 @@ Prints a Markdown table between ``<!-- bench_jit:begin -->`` / ``<!-- bench_jit:
 import argparse
 import os
 import re
+import resource
 import shutil
 import subprocess
 import sys
@@ -39,12 +42,16 @@ LOOP = re.compile(r"\] (\d+) steps in ([0-9.]+) s")
 
 
 def run_case(case, cache, out, threads, timeout):
-    """(wall s, stepping-loop s from the log, error or None) of one ``demcli run``."""
+    """(wall s, CPU s, stepping-loop s from the log, error or None) of one ``demcli run``.
+
+    The CPU seconds (user + system of the child) are what the run costs on an idle core: on a
+    machine that other jobs share, the wall time also counts the waits for a core."""
     env = dict(os.environ, NUMBA_CACHE_DIR=cache, DEMCLI_NUMBA_CACHE="1")
     env.pop("NUMBA_DISABLE_JIT", None)
     cmd = [sys.executable, "-m", "demcli", "run", case, "--out", out, "--threads", str(threads), "--quiet",
            "--force"]
     t0 = time.perf_counter()
+    ru0 = resource.getrusage(resource.RUSAGE_CHILDREN)
     try:
         p = subprocess.run(cmd, cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
                            timeout=timeout)
@@ -52,13 +59,15 @@ def run_case(case, cache, out, threads, timeout):
     except subprocess.TimeoutExpired:
         err = f"killed after {timeout:.0f} s"
     wall = time.perf_counter() - t0
+    ru1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = (ru1.ru_utime - ru0.ru_utime) + (ru1.ru_stime - ru0.ru_stime)
     loop = 0.0
     try:
         with open(os.path.join(out, "log.txt"), encoding="utf-8") as f:
             loop = sum(float(m.group(2)) for m in LOOP.finditer(f.read()))
     except OSError:
         pass
-    return wall, loop, err
+    return wall, cpu, loop, err
 
 
 def main(argv=None):
@@ -80,24 +89,25 @@ def main(argv=None):
                 print(f"  [{time.strftime('%H:%M:%S')}] {case} {kind} (load {os.getloadavg()[0]:.2f}) ...",
                       end="", flush=True)
                 res[kind] = run_case(case, cache, os.path.join(tmp, kind), a.threads, a.timeout)
-                wall, loop, err = res[kind]
-                print(f" {wall:.1f} s" + (f" FAILED {err}" if err else ""), flush=True)
+                wall, cpu, loop, err = res[kind]
+                print(f" {wall:.1f} s ({cpu:.1f} s CPU)" + (f" FAILED {err}" if err else ""), flush=True)
             files = sum(len(f) for _, _, f in os.walk(cache))
         finally:
             shutil.rmtree(tmp, ignore_errors=True)
-        (cw, cl, ce), (ww, wl, we) = res["cold"], res["warm"]
+        (cw, cc, cl, ce), (ww, wc, wl, we) = res["cold"], res["warm"]
         failed |= bool(ce or we)
         worst_cold, worst_warm = max(worst_cold, cw), max(worst_warm, ww)
         verdict = ("cold " + ("ok" if cw < COLD_TARGET_S else "OVER") + ", warm "
                    + ("ok" if ww < WARM_TARGET_S else "OVER")) if not (ce or we) else "FAILED: " + (ce or we)
-        rows.append(f"| `{case}` | {cw:.1f} | {ww:.1f} | {cw - ww:.1f} | {wl:.2f} | {ww - wl:.1f} | {files} | "
+        rows.append(f"| `{case}` | {cw:.1f} | {cc:.1f} | {ww:.1f} | {wc:.1f} | {cw - ww:.1f} | {wl:.2f} | "
+                    f"{ww - wl:.1f} | {files} | "
                     f"{verdict} |")
 
     print("<!-- bench_jit:begin -->")
-    print("| case | cold s (empty cache) | warm s (from cache) | cold - warm s (compile) | "
-          "stepping loops s (warm) | warm - loops s | cache files | targets (cold < "
+    print("| case | cold s (empty cache) | cold CPU s | warm s (from cache) | warm CPU s | "
+          "cold - warm s (compile) | stepping loops s (warm) | warm - loops s | cache files | targets (cold < "
           f"{COLD_TARGET_S:g} s, warm < {WARM_TARGET_S:g} s) |")
-    print("|---|---|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|---|---|---|")
     for r in rows:
         print(r)
     print("<!-- bench_jit:end -->")

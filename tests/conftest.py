@@ -8,6 +8,13 @@ ROOT = Path(__file__).resolve().parent.parent
 CASES = ROOT / "cases"
 
 
+@pytest.fixture(scope="session")
+def ballast_library_dir(tmp_path_factory):
+    """One ballast library folder for the whole test session (content-addressed, so cases that
+    ask for the same library share one file safely)."""
+    return tmp_path_factory.getbasetemp() / "ballast_library"
+
+
 @pytest.fixture
 def smoke_case():
     return CASES / "smoke" / "beads.yaml"

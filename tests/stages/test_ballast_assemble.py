@@ -20,16 +20,15 @@ SMOKE = {name: CASES / "smoke" / f"ballast_{name}.yaml" for name in ("wide", "si
 BOXES = {"wide": (0.3, 0.2), "single_large": (0.3, 0.2), "single_small": (0.15, 0.12)}
 
 
-def run(tmp_path_factory, name, out=None, libdir=None, extra=()):
+def run(tmp_path_factory, name, libdir, out=None, extra=()):
     out = out or tmp_path_factory.mktemp(name)
-    libdir = libdir or tmp_path_factory.getbasetemp() / "ballast_library"
     run_case(SMOKE[name], out=out, quiet=True, overrides=[f"stages.library.directory={libdir}", *extra])
     return out
 
 
 @pytest.fixture(scope="module")
-def runs(tmp_path_factory):
-    return {name: run(tmp_path_factory, name) for name in SMOKE}
+def runs(tmp_path_factory, ballast_library_dir):
+    return {name: run(tmp_path_factory, name, ballast_library_dir) for name in SMOKE}
 
 
 @pytest.mark.parametrize("name", list(SMOKE))
@@ -114,7 +113,7 @@ def test_bodies_carry_exact_mass_properties(runs):
 
 def test_same_seed_same_library_and_assembly_bit_for_bit(runs, tmp_path_factory):
     # Given the wide smoke case run again in a fresh folder with a fresh library folder
-    again = run(tmp_path_factory, "wide", libdir=tmp_path_factory.mktemp("fresh_library"))
+    again = run(tmp_path_factory, "wide", tmp_path_factory.mktemp("fresh_library"))
     a, b = read_state(runs["wide"] / "02-assembly.h5"), read_state(again / "02-assembly.h5")
     # Then the rebuilt library file is byte-identical and the assembly identical bit for bit
     assert Path(a.group_attrs["library"]["path"]).read_bytes() == Path(b.group_attrs["library"]["path"]).read_bytes()
@@ -124,9 +123,9 @@ def test_same_seed_same_library_and_assembly_bit_for_bit(runs, tmp_path_factory)
             assert arr.dtype == other.dtype and np.array_equal(arr, other), f"{group}/{name}"
 
 
-def test_needle_and_flaky_shares_are_honoured(runs, tmp_path_factory):
+def test_needle_and_flaky_shares_are_honoured(runs, tmp_path_factory, ballast_library_dir):
     # Given the wide smoke bed asked for 20 % needle and 15 % flaky particles by mass in each class
-    out = run(tmp_path_factory, "wide", extra=["stages.assembly.needle_share=0.2", "stages.assembly.flaky_share=0.15"])
+    out = run(tmp_path_factory, "wide", ballast_library_dir, extra=["stages.assembly.needle_share=0.2", "stages.assembly.flaky_share=0.15"])
     st = read_state(out / "02-assembly.h5")
     vol = st["polyhedron_shapes/volume"][st["polyhedra/shape"]]
     needle, flaky = st["polyhedra/elongated"], st["polyhedra/flaky"] & ~st["polyhedra/elongated"]

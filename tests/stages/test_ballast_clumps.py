@@ -92,10 +92,10 @@ def test_ball_count_and_volume_error_follow_the_ball_size():
 
 
 @pytest.fixture(scope="module")
-def smoke(tmp_path_factory):
+def smoke(tmp_path_factory, ballast_library_dir):
     out = tmp_path_factory.mktemp("ballast_clumps")
     run_case(CASES / "smoke" / "ballast_clumps.yaml", out=out, quiet=True,
-             overrides=[f"stages.library.directory={tmp_path_factory.getbasetemp() / 'ballast_library'}"])
+             overrides=[f"stages.library.directory={ballast_library_dir}"])
     return out
 
 

@@ -14,16 +14,11 @@ from demcli.state import read_state
 CASES = Path(__file__).resolve().parents[2] / "cases"
 
 
-def library_dir(tmp_path_factory):
-    """One library folder for the whole test session (content-addressed, so shared safely)."""
-    return tmp_path_factory.getbasetemp() / "ballast_library"
-
-
 @pytest.fixture(scope="module")
-def wide(tmp_path_factory):
+def wide(tmp_path_factory, ballast_library_dir):
     out = tmp_path_factory.mktemp("wide_smoke")
     run_case(CASES / "smoke" / "ballast_wide.yaml", out=out, quiet=True,
-             overrides=[f"stages.library.directory={library_dir(tmp_path_factory)}"])
+             overrides=[f"stages.library.directory={ballast_library_dir}"])
     return out
 
 
@@ -62,10 +57,10 @@ def test_particles_are_sized_filed_and_stored_exactly(wide):
     assert (wide / "records" / "library_library.csv").exists()
 
 
-def test_cases_with_the_same_generator_share_one_library(wide, tmp_path, tmp_path_factory):
+def test_cases_with_the_same_generator_share_one_library(wide, tmp_path, ballast_library_dir):
     # Given the single-size smoke case, which asks for the same library as the wide one
     run_case(CASES / "smoke" / "ballast_single_large.yaml", out=tmp_path, quiet=True,
-             overrides=[f"stages.library.directory={library_dir(tmp_path_factory)}"])
+             overrides=[f"stages.library.directory={ballast_library_dir}"])
     a = read_state(wide / "01-library.h5").group_attrs["library"]
     b = read_state(tmp_path / "01-library.h5").group_attrs["library"]
     # Then it names the same file, reused rather than rebuilt
