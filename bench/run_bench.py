@@ -2,7 +2,7 @@
 
 Runs, alternating (demcli, peer, demcli, peer, ...; all entries once, then all a second
 time), the peers' scenes (default: the sphere scene dense_10000 and the clump scene
-clump_500, 20000 steps, dt = 1e-6 s):
+clump_500, 20000 steps, dt = 1e-6 s; the polyhedron scene poly_500, 10000 steps, dt = 2e-5 s):
 
 * demcli with 1 and 2 numba threads (bench/bench_spheres.py), plus 2 threads with
   OMP_WAIT_POLICY=PASSIVE (see bench/README.md: on a shared 2-core machine the default
@@ -13,12 +13,16 @@ clump_500, 20000 steps, dt = 1e-6 s):
 * clump_NC (rigid clumps of 5-10 overlapping spheres, ../shared/peers/common/clump_setup.py):
   demcli 1 and 2 threads (bench/bench_clumps.py) against YADE (peers/yade/clump.py, the only
   peer with that scene); --clump-settle fall steps first, then the timed --steps window.
+* poly_N (random convex polyhedra falling into a box, bench/scene_poly.py): demcli 1 and 2
+  threads (bench/bench_poly.py) against YADE Polyhedra (peers/yade/poly.py), --poly-steps.
 
 Then a scaling row (demcli, 1 thread, dense, N = 1e3, 1e4, 1e5 [1e6 with --big], the same
 number of steps for every N: the cost per particle-step should stay flat), the geometry
 toolkit's bench/bench_sieve.py when it exists, and the 3D asphalt Marshall pipeline's wall time per
 stage against the lattice ball size (bench/bench_asphalt.py), and the cold/warm JIT
-compile time of `demcli run` on two smoke cases (bench/bench_jit.py).
+compile time of `demcli run` on two smoke cases (bench/bench_jit.py), and the scenes no peer
+has (2D sections, ballast library, polyhedron narrow phase, a bonded specimen: each script's
+figure line).
 
 Every run is a separate process whose LAST line is ``particle_steps_per_s=<number>``.
 The table (runs, median, ratio to LIGGGHTS) is printed and written to bench/results.md
@@ -26,7 +30,7 @@ The table (runs, median, ratio to LIGGGHTS) is printed and written to bench/resu
 
 Usage: python bench/run_bench.py [--quick] [--scenes dense_10000,clump_500] [--repeat K]
                                  [--skip-peers] [--skin S] [--peer-skin M] [--big]
-                                 [--clump-settle STEPS] [--no-jit]
+                                 [--clump-settle STEPS] [--poly-steps STEPS] [--no-jit]
                                  [--no-asphalt] [--asphalt-spacings 2.0,1.4,1.0,0.7]
 """
 
@@ -49,9 +53,10 @@ PEERS_DEFAULT = os.path.normpath(os.path.join(ROOT, "..", "shared", "peers"))
 PEER_BIN = {"liggghts": "liggghts", "lammps": "lmp", "yade": "yade"}
 PEER_ORDER = ("liggghts", "lammps", "yade")
 RATE = re.compile(r"^particle_steps_per_s=([0-9.eE+-]+)\s*$")
-SCENE = re.compile(r"(drop|dense|clump)_(\d+)")
-DEFAULT_SCENES = "dense_10000,clump_500"
+SCENE = re.compile(r"(drop|dense|clump|poly)_(\d+)")
+DEFAULT_SCENES = "dense_10000,clump_500,poly_500"
 CLUMP_SETTLE = 100000   # fall steps before the clump window (the peers' RESULTS.md uses 100000)
+POLY_STEPS = 10000      # the peers' poly scene: a 0.2 s fall at dt 2e-5 s (peers/yade/poly.py, RESULTS.md)
 KV = re.compile(r"([A-Za-z_][A-Za-z_0-9]*)=([^\s]+)")
 
 
@@ -65,9 +70,12 @@ def parse_args(argv=None):
                     help="smoke test: dense_1000 for 2000 steps, small scaling row, small sieve run; "
                          "writes no results file unless --out is given")
     ap.add_argument("--scenes", default=None,
-                    help="comma list of VARIANT_N (VARIANT = drop|dense|clump; N = spheres, or clumps for clump), "
+                    help="comma list of VARIANT_N (VARIANT = drop|dense|clump|poly; N = spheres, or clumps for "
+                         "clump, or polyhedra for poly), "
                          f"default {DEFAULT_SCENES} (--quick: dense_1000)")
     ap.add_argument("--steps", type=int, default=None, help="steps per scene run (default 20000; --quick: 2000)")
+    ap.add_argument("--poly-steps", type=int, default=None,
+                    help=f"steps of the poly scene (default {POLY_STEPS}, the peers' scene; --quick: 1000)")
     ap.add_argument("--clump-settle", type=int, default=None,
                     help=f"fall steps before the timed window of clump scenes, same for demcli and YADE "
                          f"(default {CLUMP_SETTLE}: the pile has formed; --quick: 2000)")
@@ -109,6 +117,8 @@ def parse_args(argv=None):
         a.steps = 2000 if a.quick else 20000
     if a.clump_settle is None:
         a.clump_settle = 2000 if a.quick else CLUMP_SETTLE
+    if a.poly_steps is None:
+        a.poly_steps = 1000 if a.quick else POLY_STEPS
     if a.scaling_steps is None:
         a.scaling_steps = 200 if a.quick else 2000
     if a.out is None and not a.quick:
@@ -117,7 +127,7 @@ def parse_args(argv=None):
     for s in a.scenes.split(","):
         m = SCENE.fullmatch(s.strip())
         if not m:
-            ap.error(f"bad scene {s!r}: expected drop_N, dense_N or clump_N")
+            ap.error(f"bad scene {s!r}: expected drop_N, dense_N, clump_N or poly_N")
         a.scene_list.append((m.group(1), int(m.group(2))))
     a.thread_list = [int(t) for t in a.threads.split(",") if t.strip()]
     a.peer_list = [p for p in PEER_ORDER if p in [q.strip() for q in a.peers.split(",")]]
@@ -185,6 +195,7 @@ def run_proc(cmd, cwd, env, timeout):
         rec["error"] = f"killed after {timeout:.0f} s"
     rec["process_s"] = time.perf_counter() - t0
     lines = [ln for ln in text.splitlines() if ln.strip()]
+    rec["last"] = lines[-1] if lines else None
     if lines and RATE.match(lines[-1]):
         rec["rate"] = float(RATE.match(lines[-1]).group(1))
     elif rec["error"] is None:
@@ -210,7 +221,7 @@ def reference_rows(peers_dir):
         return ref
     for ln in text.splitlines():
         c = [x.strip() for x in ln.strip().strip("|").split("|")]
-        if len(c) >= 7 and c[0] in PEER_BIN and c[1] in ("drop", "dense", "clump") and c[2].isdigit():
+        if len(c) >= 7 and c[0] in PEER_BIN and c[1] in ("drop", "dense", "clump", "poly") and c[2].isdigit():
             try:
                 r = [float(x) for x in c[6].split("/")]
             except ValueError:
@@ -259,9 +270,20 @@ class Entry:
         return self.code + (f" ({self.note})" if self.note else "")
 
 
+def scene_steps(a, variant):
+    """Steps of a scene's runs: the poly scene has its own (the peers' 0.2 s fall)."""
+    return a.poly_steps if variant == "poly" else a.steps
+
+
 def demcli_entries(a, variant, n, steps, threads_list, passive, env0):
     scene = f"{variant}_{n}"
     out = []
+    if variant == "poly":   # polyhedron-steps/s; no PASSIVE row either
+        for t in threads_list:
+            cmd = [sys.executable, os.path.join(HERE, "bench_poly.py"), "--n", str(n), "--steps", str(steps),
+                   "--threads", str(t)]
+            out.append(Entry(scene, "demcli", t, cmd, ROOT, dict(env0), timeout=a.timeout))
+        return out
     if variant == "clump":   # no PASSIVE row: the sphere scene already shows the OpenMP barrier effect
         for t in threads_list:
             cmd = [sys.executable, os.path.join(HERE, "bench_clumps.py"), str(n), str(a.clump_settle), str(steps),
@@ -288,10 +310,14 @@ def peer_entries(a, variant, n, steps, installed, refs, work):
     out = []
     clump = variant == "clump"
     settle = a.clump_settle if clump else None
+    poly = variant == "poly"
     for p in a.peer_list:
-        if clump and p != "yade":
-            continue   # only YADE has the clump scene
-        if clump:
+        if (clump or poly) and p != "yade":
+            continue   # only YADE has the clump and polyhedron scenes
+        if poly:
+            cmd = ["yade", "-j1", "-n", "-x", "peers/yade/poly.py", str(n), str(steps)]
+            e = Entry(scene, p, 1, cmd, shared, dict(env), note="Polyhedra", timeout=a.yade_max_s)
+        elif clump:
             cmd = ["yade", "-j1", "-n", "-x", "peers/yade/clump.py", str(n), str(steps), str(settle)]
             e = Entry(scene, p, 1, cmd, shared, dict(env), note="verletDist 0.5 r", timeout=a.yade_max_s)
         elif p == "yade":
@@ -371,7 +397,7 @@ def peer_base(es, refs, peer, scene, steps, settle):
     return None, ""
 
 
-def scene_table(entries, refs, repeat, steps, settle):
+def scene_table(entries, refs, repeat, a):
     head = ["scene", "code", "threads", "particle-steps/s " + " / ".join(f"run{k + 1}" for k in range(repeat)),
             "median", "ratio to LIGGGHTS", "ratio to YADE", "contacts at end (p-p + wall)", "rebuilds"]
     rows = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
@@ -379,7 +405,8 @@ def scene_table(entries, refs, repeat, steps, settle):
     for e in entries:
         by_scene.setdefault(e.scene, []).append(e)
     for scene, es in by_scene.items():
-        bases = [peer_base(es, refs, p, scene, steps, settle) for p in ("liggghts", "yade")]
+        steps = scene_steps(a, scene.split("_")[0])
+        bases = [peer_base(es, refs, p, scene, steps, a.clump_settle) for p in ("liggghts", "yade")]
         order = sorted(es, key=lambda e: (e.code != "demcli", PEER_ORDER.index(e.code) if e.code in PEER_ORDER
                                           else -1, e.threads, e.note))
         for e in order:
@@ -529,11 +556,12 @@ def main(argv=None):
     env0 = dict(os.environ)
     entries = []
     for variant, n in a.scene_list:
-        dem = demcli_entries(a, variant, n, a.steps, a.thread_list, not a.no_passive, env0)
-        peers = [] if a.skip_peers else peer_entries(a, variant, n, a.steps, installed, refs, work)
+        steps = scene_steps(a, variant)
+        dem = demcli_entries(a, variant, n, steps, a.thread_list, not a.no_passive, env0)
+        peers = [] if a.skip_peers else peer_entries(a, variant, n, steps, installed, refs, work)
         for e in peers:
             ref = refs.get((e.code, variant, n))
-            e.refback = ref[0] if ref_matches(ref, a.steps, a.clump_settle if variant == "clump" else None) \
+            e.refback = ref[0] if ref_matches(ref, steps, a.clump_settle if variant == "clump" else None) \
                 else None
         entries.append(interleave(dem, peers))
 
@@ -557,11 +585,17 @@ def main(argv=None):
     sieve = None if a.no_sieve else run_sieve(a.quick)
     asphalt = None if a.no_asphalt else run_asphalt(a)
     jit = None if (a.no_jit or a.quick) else run_jit(a)
-    # 2D sections; ballast library build rate; polyhedron narrow phase; the peers' poly scene; a bonded specimen
+    # 2D sections; ballast library build rate; polyhedron narrow phase; a bonded specimen (no peer has these)
+    others = []
     quick_args = {"bench_polygons.py": ["--quick"], "bench_library.py": ["--quick"], "bench_polyhedra.py": [],
-                  "bench_poly.py": ["--n", "100", "--steps", "1000"], "bench_bonds.py": ["--steps", "2000"]}
+                  "bench_bonds.py": ["--steps", "2000"]}
     for script, qargs in quick_args.items():
-        subprocess.run([sys.executable, os.path.join(HERE, script)] + (qargs if a.quick else []), cwd=ROOT)
+        cmd = [sys.executable, os.path.join(HERE, script)] + (qargs if a.quick else [])
+        print(f"  [{time.strftime('%H:%M:%S')}] {script} (load {load()}) ...", flush=True)
+        rec = run_proc(cmd, ROOT, dict(env0), a.timeout)
+        last = rec["last"] or rec["error"] or "no output"
+        print(f"    {last}", flush=True)
+        others.append((" ".join(["python", "bench/" + script] + (qargs if a.quick else [])), last))
     load1 = load()
     digest1 = source_digest()
     git1 = sh("git -C " + shlex.quote(ROOT) + " rev-parse --short HEAD") or "?"
@@ -585,12 +619,16 @@ def main(argv=None):
              f"{a.steps}-step window; counted per member sphere; demcli clump mass = union of the members "
              "(overlaps once), YADE's = sum of the members (see bench/scene_clumps.py); YADE is the only peer "
              "with this scene"] if any(v == "clump" for v, _ in a.scene_list) else []),
+          *([f"- poly_N: N random convex polyhedra (10-20 mm) falling from a lattice into a closed box, "
+             f"{a.poly_steps} steps at dt 2e-5 s, rho 2600, E 1e9 Pa (bench/scene_poly.py, peers/yade/poly.py); "
+             "counted per polyhedron; YADE Polyhedra is the only peer with this scene"]
+            if any(v == "poly" for v, _ in a.scene_list) else []),
           f"- demcli skin {a.skin:g} r = {a.skin:g} mm; LIGGGHTS/LAMMPS skin {a.peer_skin * 1e3:g} mm "
           f"(DROP_SKIN={a.peer_skin:g}); YADE verletDist 0.5 r (its default, drop.py has no option); "
           "peers single-threaded (OMP_NUM_THREADS=1, one MPI rank, yade -j1)",
           "- particle-steps/s = N x steps / seconds of the time-stepping loop only (no start-up, set-up or JIT)",
           ""]
-    md += scene_table(flat, refs, a.repeat, a.steps, a.clump_settle)
+    md += scene_table(flat, refs, a.repeat, a)
     ctab = clump_table(flat)
     if ctab:
         md += ["", f"Clump scene, fall phase ({a.clump_settle} steps) and state at the end of the window "
@@ -607,6 +645,9 @@ def main(argv=None):
     if jit:
         md += ["", f"JIT compile, whole `demcli run` wall time with an empty numba cache (cold) and from it (warm), "
                    f"one thread (`{jit[0]}`):", "", jit[1]]
+    if others:
+        md += ["", "demcli only (no peer has these): each script's figure line, one run:", ""]
+        md += [f"- `{cmd}`: `{last}`" for cmd, last in others]
     fails = [(e, r) for e in flat + scaling for r in e.runs if r["rate"] is None]
     if fails:
         md += ["", "Failed runs:"] + [f"- {e.scene} {e.label()}: {r['error']}" for e, r in fails]
