@@ -643,7 +643,8 @@ def main(argv=None):
         md += ["", f"3D asphalt, Marshall pipeline against the lattice ball size (`{asphalt[0]}`; "
                    "see docs/asphalt3d.md, \"Cost against ball size\"):", "", asphalt[1]]
     if jit:
-        md += ["", f"JIT compile, whole `demcli run` wall time with an empty numba cache (cold) and from it (warm), "
+        md += ["", f"JIT compile: seconds in numba's compiler lock (compiling, or loading from the cache) and the "
+                   f"whole `demcli run`'s wall and CPU time, with an empty numba cache (cold) and from it (warm), "
                    f"one thread (`{jit[0]}`):", "", jit[1]]
     if others:
         md += ["", "demcli only (no peer has these): each script's figure line, one run:", ""]
