@@ -138,6 +138,7 @@ def test_signal_writes_a_checkpoint(smoke_case, tmp_path, h5_differences, sig, w
 import os, signal, subprocess, sys, time
 from demcli.engine import system as system_mod
 from demcli.cli import main
+signal.signal(signal.SIGINT, signal.default_int_handler)  # as in a terminal (a background job ignores SIGINT)
 real = system_mod.System.advance
 calls = [0]
 def advance(self, n):
