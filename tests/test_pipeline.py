@@ -133,7 +133,7 @@ def test_signal_writes_a_checkpoint(smoke_case, tmp_path, h5_differences, sig, w
     run_case(smoke_case, out=tmp_path / "ref", quiet=True, overrides=overrides)
     # When `demcli run` gets SIGTERM (a batch system's time limit) or SIGINT (Ctrl-C) in the middle
     # of the dem stage: between two chunks, or while a compiled chunk runs (a process outside
-    # sends it 0.2 s into a ~0.5 s chunk)
+    # sends it 0.1 s into a chunk of ~0.5 s: the stage sizes its chunks to half a second)
     script = f"""
 import os, signal, subprocess, sys, time
 from demcli.engine import system as system_mod
@@ -148,10 +148,10 @@ def advance(self, n):
     if {when!r} == "between":
         os.kill(os.getpid(), signal.{sig})
         return real(self, n)
-    killer = subprocess.Popen(["sh", "-c", "sleep 0.2; kill -{sig[3:]} {{}}".format(os.getpid())])
+    killer = subprocess.Popen(["sh", "-c", "sleep 0.1; kill -{sig[3:]} {{}}".format(os.getpid())])
     t0 = time.perf_counter()
     out = real(self, n)
-    if killer.poll() is not None and time.perf_counter() - t0 > 0.2:
+    if killer.poll() is not None and time.perf_counter() - t0 > 0.1:
         print("signal arrived during the chunk", file=sys.stderr)
     killer.wait()
     return out
