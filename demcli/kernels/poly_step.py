@@ -72,7 +72,8 @@ from demcli.kernels.layout import (BAD_ENERGY, BAD_NUMBER, BAD_OVERLAP, C_BODY, 
                                    C_ENERGY, C_FRICTION, C_GATHER, C_GRAVITY, C_KICK, C_PAIRS, C_REBUILD,
                                    C_WALLCTRL, C_WALLMOVE, FIX_ROTATION, FIX_TRANSLATION, FIX_X, LOADED, OK)
 from demcli.kernels.neighbors import build_pairs, build_reverse, build_wall_pairs, carry_history
-from demcli.kernels.polyhedra import contact_frame, overlap, plane_overlap, to_world_planes, to_world_vertices
+from demcli.kernels.polyhedra import (contact_frame, max_row, overlap_ws, plane_overlap, scratch,
+                                      to_world_planes, to_world_vertices)
 from demcli.kernels.step import _body_loads, _drift, _omega_from_L, _rotate_rigid, _wall_control, move_walls
 
 # columns of the material-pair table prm[a, b, :]
@@ -283,6 +284,9 @@ def _pair_forces(start, pj, x, v, w, mass, rad, bmat, prm, sw, dt,
     friction = sw[S_FRICTION]
     energy = sw[S_ENERGY]
     dashpot = sw[S_DASHPOT]
+    # scratch of overlap_ws for any pair of these shapes: largest face, most faces
+    max_fv = max_row(fvstart)
+    max_f = max_row(face_start)
     for i in prange(start.shape[0] - 1):
         sfx = 0.0
         sfy = 0.0
@@ -295,6 +299,7 @@ def _pair_forces(start, pj, x, v, w, mass, rad, bmat, prm, sw, dt,
         c0 = start[i]
         c1 = start[i + 1]
         if c1 > c0:
+            buf, fw, planes = scratch(max_fv, max_f)  # once per row, not per pair
             xi0 = x[i, 0]
             xi1 = x[i, 1]
             xi2 = x[i, 2]
@@ -330,10 +335,10 @@ def _pair_forces(start, pj, x, v, w, mass, rad, bmat, prm, sw, dt,
                                                                            margin):
                         vol = 0.0
                     else:
-                        vol, gx, gy, gz, sx, sy, sz = overlap(
+                        vol, gx, gy, gz, sx, sy, sz = overlap_ws(
                             va, fsa, fverts, offa, na, da, xi0, xi1, xi2, ri,
                             vb, fvstart[face_start[kj]:face_start[kj + 1] + 1], fverts,
-                            vertex_start[kj], nb_, db_, xj0, xj1, xj2, rj)
+                            vertex_start[kj], nb_, db_, xj0, xj1, xj2, rj, buf, fw, planes)
                         if not vol > 0.0 and code != SEP_NONE:
                             ga, fa = _clearance(na, da, vb)
                             gb, fb = _clearance(nb_, db_, va)

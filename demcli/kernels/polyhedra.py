@@ -283,7 +283,9 @@ def _piece(p, i0, m, nx, ny, nz, h, ox, oy, oz, work):
 
 
 @njit(inline="always")
-def _max_face(fs):
+def max_row(fs):
+    """Longest row of a CSR offset array (faces: the most vertices of a face; shapes:
+    the most faces of a shape)."""
     m = 0
     for f in range(fs.shape[0] - 1):
         k = fs[f + 1] - fs[f]
@@ -674,7 +676,7 @@ def overlap(va, fsa, fva, offa, na, da, cax, cay, caz, ra,
         return 0.0, mx_, my_, mz_, 0.0, 0.0, 0.0
     nfa = fsa.shape[0] - 1
     nfb = fsb.shape[0] - 1
-    cap = max(_max_face(fsa), _max_face(fsb)) + max(nfa, nfb) + 2
+    cap = max(max_row(fsa), max_row(fsb)) + max(nfa, nfb) + 2
     buf = np.empty((2 * cap, 3))
     fw = np.empty(36 + cap)
     planes = np.empty(nfa + nfb, dtype=np.int64)
@@ -741,11 +743,12 @@ def overlap_ws(va, fsa, fva, offa, na, da, cax, cay, caz, ra,
     return _finish(fw, 18, mx_, my_, mz_)
 
 
+@njit
 def scratch(max_face_vertices, max_faces):
     """Scratch arrays (buf, fw, planes) for :func:`overlap_ws`, large enough for any
     pair of bodies with at most max_faces faces of at most max_face_vertices each."""
-    cap = int(max_face_vertices) + int(max_faces) + 2
-    return np.empty((2 * cap, 3)), np.empty(36 + cap), np.empty(2 * int(max_faces), dtype=np.int64)
+    cap = max_face_vertices + max_faces + 2
+    return np.empty((2 * cap, 3)), np.empty(36 + cap), np.empty(2 * max_faces, dtype=np.int64)
 
 
 @njit(inline="always")
@@ -794,7 +797,7 @@ def plane_overlap(va, fsa, fva, offa, na, da, cax, cay, caz, ra, wnx, wny, wnz, 
     if sc > ra + tol:
         return 0.0, ox, oy, oz, 0.0, 0.0, 0.0
     nfa = fsa.shape[0] - 1
-    cap = _max_face(fsa) + 2
+    cap = max_row(fsa) + 2
     buf = np.empty((2 * cap, 3))
     sbuf = np.empty(cap)
     work = np.zeros(18)  # the sums, laid out as fw[18:36] in _faces_inside

@@ -10,7 +10,8 @@ from scipy.optimize import linprog
 from scipy.spatial import ConvexHull, HalfspaceIntersection
 
 from demcli.geometry import convex_hull, random_polyhedron
-from demcli.kernels.polyhedra import contact_frame, overlap, place, polyhedron_overlap, polyhedron_plane_overlap
+from demcli.kernels.polyhedra import (contact_frame, overlap, overlap_ws, place, polyhedron_overlap,
+                                     polyhedron_plane_overlap, scratch)
 
 CUBE = convex_hull(np.array(list(itertools.product([-0.5, 0.5], repeat=3))))
 
@@ -231,6 +232,22 @@ def test_engine_layout_slices_give_the_same_result():
                   verts[nva:], fvs[nfa:], fv, nva, normals[nfa:], offsets[nfa:], *b.center, b.radius)
     # Then nothing changes
     assert got == ref
+
+
+def test_shared_scratch_gives_the_same_result_as_fresh_scratch():
+    # Given random pairs of different sizes and one scratch sized for the largest of them, as
+    # the engine's pair pass allocates it once per row and reuses it for every pair in the row
+    rng = np.random.default_rng(11)
+    pairs = [random_pair(rng, d)[2:4] for d in (0.001, 0.05, 0.2, 0.4)]
+    most_faces = max(len(p.normals) for pair in pairs for p in pair)
+    widest_face = max(int(np.diff(p.face_start).max()) for pair in pairs for p in pair)
+    buf, fw, planes = scratch(widest_face, most_faces)
+    for a, b in pairs:
+        # When the overlap runs in the shared scratch, left dirty by the pair before
+        got = overlap_ws(*a.args(), *b.args(), buf, fw, planes)
+        # Then it is bit-identical to a call with scratch of its own size
+        assert got == overlap(*a.args(), *b.args())
+        assert got[0] > 0.0
 
 
 # ----------------------------------------------------------------------------- walls
