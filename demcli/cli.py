@@ -26,25 +26,15 @@ def cli():
 @click.option("--resume", is_flag=True, help="Continue interrupted stages from their checkpoints.")
 def run(case, from_stage, only, force, overrides, out, threads, quiet, resume):
     """Run the stages of CASE (a YAML file)."""
+    from demcli.interrupts import stop_as_interrupt
     from demcli.pipeline import run_case
 
-    _sigterm_as_interrupt()
+    stop_as_interrupt()  # SIGTERM as Ctrl-C: the running stage writes its checkpoint for --resume
     results = run_case(case, out=out, from_stage=from_stage, only=only, force=force, overrides=overrides,
                        threads=threads, quiet=quiet, resume=resume)
     if not quiet:
         for r in results:
             click.echo(f"{r.name:>16}  {'skipped' if r.skipped else f'{r.wall_time:8.2f} s'}  {r.path}")
-
-
-def _sigterm_as_interrupt():
-    """SIGTERM (a batch system's time limit, ``kill``) stops a run as Ctrl-C does: the running
-    stage writes its checkpoint for ``--resume``."""
-    import signal
-
-    def handler(signum, frame):
-        raise KeyboardInterrupt
-
-    signal.signal(signal.SIGTERM, handler)
 
 
 @cli.command()
@@ -104,7 +94,10 @@ def compare(runs, record, x, ys, out):
 @click.option("--quiet", is_flag=True, help="No progress lines; the table is still printed.")
 def study(case, varies, metric, reference, overrides, out, jobs, threads_per_job, force, cold, quiet):
     """Run CASE once per variant and report metric, error and wall time (CSV, Markdown, PNG)."""
+    from demcli.interrupts import stop_as_interrupt
     from demcli.study import run_study
+
+    stop_as_interrupt()  # SIGTERM as Ctrl-C: stops the study, its workers too
 
     result = run_study(case, varies, metric, out=out, jobs=jobs, threads_per_job=threads_per_job,
                        reference=reference, overrides=overrides, force=force, cold=cold,

@@ -12,6 +12,7 @@ that their exception (``KeyboardInterrupt``) reaches the loop's checkpoint path.
 whose handler is not a Python callable (the default action, ignored) are left alone.
 """
 
+import os
 import signal
 import threading
 from contextlib import contextmanager
@@ -49,3 +50,42 @@ def deferred():
         for sig, handler in saved.items():
             signal.signal(sig, handler)
     poll()
+
+
+_LLVMLITE = f"{os.sep}llvmlite{os.sep}"
+RETRY_S = 0.05  # a signal that came inside llvmlite's callbacks is sent again after this [s]
+
+
+def _inside_llvmlite(frame):
+    while frame is not None:
+        if _LLVMLITE in frame.f_code.co_filename:
+            return True
+        frame = frame.f_back
+    return False
+
+
+def _raise_interrupt(signum, frame):
+    """KeyboardInterrupt; inside llvmlite (numba compiling or loading a kernel, in a ctypes
+    callback, where an exception is printed and dropped) the signal is sent again shortly."""
+    if _inside_llvmlite(frame):
+        threading.Timer(RETRY_S, os.kill, (os.getpid(), signum)).start()
+        return
+    raise KeyboardInterrupt
+
+
+def stop_as_interrupt():
+    """SIGTERM (a batch system's time limit, ``kill``) stops this process as Ctrl-C does, and
+    neither is lost while numba compiles: a running stage writes its checkpoint. Returns the
+    replaced handlers, for :func:`restore` (SIGINT only when Python's default was in place:
+    an ignored SIGINT stays ignored)."""
+    saved = {}
+    for sig in _SIGNALS:
+        if sig == signal.SIGTERM or signal.getsignal(sig) is signal.default_int_handler:
+            saved[sig] = signal.signal(sig, _raise_interrupt)
+    return saved
+
+
+def restore(saved):
+    """Put back the handlers :func:`stop_as_interrupt` replaced."""
+    for sig, handler in saved.items():
+        signal.signal(sig, handler)

@@ -146,7 +146,6 @@ class StageContext:
         st = self.state_from(system, plan)
         self.runner.finish_state(st)
         write_state(self.lastgood_path, st)
-        self.log(message)
         raise StageError(message, state_file=self.lastgood_path)
 
     def write_records(self, table, x, ys, logy=False, suffix=None, logx=False):
@@ -262,7 +261,11 @@ class Runner:
                                        or len(state_in.groups["bodies"]["mass"]))
                 self.log(f"[{cfg.name}] {cfg.type} stage started")
                 t0 = _time.perf_counter()
-                state = st_type.run(ctx, cfg, state_in)
+                try:
+                    state = st_type.run(ctx, cfg, state_in)
+                except StageError as exc:  # the log keeps why a stage stopped (a batch job's stderr may not)
+                    self.log(f"[{cfg.name}] {exc.format_message()}")
+                    raise
                 set_rng(state, ctx.rng)
                 self.finish_state(state)
                 write_state(out_path, state)

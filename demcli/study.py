@@ -329,12 +329,15 @@ def _run_variant(job):
     their arguments faithfully); anything else is a bug and propagates.
     """
     global _WARM
+    from demcli.interrupts import restore, stop_as_interrupt
     from demcli.pipeline import run_case
 
     def once(force):
         return run_case(job["case"], out=job["out"], overrides=job["overrides"], threads=job["threads"],
                         quiet=True, force=force)
 
+    # a worker stops its variant at SIGTERM as at Ctrl-C (an idle one just exits)
+    previous = stop_as_interrupt()
     try:
         results = once(job["force"])
         ran = any(not r.skipped for r in results)
@@ -351,6 +354,8 @@ def _run_variant(job):
     except DemcliError as exc:
         return {"slug": job["slug"], "status": "error", "exit_code": exc.exit_code,
                 "message": exc.format_message(), "stages": []}
+    finally:
+        restore(previous)
     return {"slug": job["slug"], "status": "ok", "message": "", "repeated": repeated,
             "stages": [(r.name, str(r.path), bool(r.skipped), float(r.wall_time)) for r in results]}
 
@@ -376,7 +381,12 @@ def _execute(jobs_list, jobs, on_done):
         futures = {ex.submit(_run_variant, job): job for job in jobs_list}
         for fut in as_completed(futures):
             on_done(futures[fut], fut.result())
-    except BaseException:
+    except BaseException as exc:
+        if isinstance(exc, KeyboardInterrupt):
+            # Ctrl-C reaches the whole process group, a SIGTERM (kill, a job's limit) only this
+            # process: pass it on, so that the running variants stop now instead of running on
+            for proc in multiprocessing.active_children():
+                proc.terminate()
         ex.shutdown(wait=True, cancel_futures=True)
         raise
     ex.shutdown(wait=True)
@@ -517,6 +527,9 @@ def run_study(case, varies, metric, out=None, jobs=None, threads_per_job=1, refe
 
     try:
         _execute(job_list, jobs, on_done)
+    except KeyboardInterrupt:
+        raise StageError("study interrupted; the same command again reuses the variants that finished "
+                         "and runs the others") from None
     finally:
         manifest.update({"case": str(case), "metric": metric.text, "set": fixed,
                          "vary": {v.path: list(v.values) for v in varies}})

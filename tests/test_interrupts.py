@@ -2,6 +2,7 @@
 
 import os
 import signal
+import time
 
 import pytest
 
@@ -60,3 +61,50 @@ def test_an_exception_in_the_block_drops_held_signals(recording_handler):
             os.kill(os.getpid(), signal.SIGTERM)
             raise RuntimeError("stage failed")
     assert recording_handler == []
+
+
+def _frame_in(filename):
+    """A frame whose code comes from ``filename``."""
+    ns = {}
+    exec(compile("import sys\nframe = sys._getframe()", filename, "exec"), ns)
+    return ns["frame"]
+
+
+def test_a_signal_inside_llvmlite_is_sent_again_later(monkeypatch):
+    # Given the stop handler and a frame inside llvmlite (numba compiling: a ctypes callback,
+    # where an exception would be printed and dropped)
+    sent = []
+    monkeypatch.setattr(interrupts.os, "kill", lambda pid, sig: sent.append((pid, sig)))
+    frame = _frame_in(os.path.join(os.sep, "site-packages", "llvmlite", "binding", "executionengine.py"))
+    # When SIGTERM lands there
+    interrupts._raise_interrupt(signal.SIGTERM, frame)
+    # Then nothing is raised, and the same signal goes to this process again a moment later
+    assert sent == []
+    deadline = time.monotonic() + 5
+    while not sent and time.monotonic() < deadline:
+        time.sleep(0.01)
+    assert sent == [(os.getpid(), signal.SIGTERM)]
+    # while anywhere else it is a KeyboardInterrupt at once
+    with pytest.raises(KeyboardInterrupt):
+        interrupts._raise_interrupt(signal.SIGTERM, _frame_in(os.path.join(os.sep, "work", "demcli", "x.py")))
+
+
+def test_stop_as_interrupt_takes_sigterm_and_leaves_an_ignored_sigint(monkeypatch):
+    # Given SIGINT ignored (a background job) and SIGTERM at its default
+    old = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    try:
+        # When the stop handlers go in
+        saved = interrupts.stop_as_interrupt()
+        # Then SIGTERM raises KeyboardInterrupt, SIGINT stays ignored, and restore() puts back SIGTERM
+        assert signal.getsignal(signal.SIGTERM) is interrupts._raise_interrupt
+        assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN
+        with pytest.raises(KeyboardInterrupt):
+            os.kill(os.getpid(), signal.SIGTERM)
+            time.sleep(1)
+        interrupts.restore(saved)
+        assert signal.getsignal(signal.SIGTERM) is signal.SIG_DFL
+    finally:
+        for sig, handler in old.items():
+            signal.signal(sig, handler)

@@ -2,7 +2,11 @@
 
 import csv
 import math
+import os
 import shlex
+import subprocess
+import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -330,3 +334,54 @@ def test_ctrl_c_in_a_variant_stops_the_study(tmp_path, monkeypatch):
     # Then the study stops at once instead of going on to the next variant
     with pytest.raises(StageError, match="study interrupted in variant dt_factor=0.2"):
         run_study(IMPACT, [f"{DT}=0.2,0.1"], "impact.dem.kinetic", out=tmp_path, jobs=1)
+
+
+def _children(pid):
+    """PIDs of the processes whose parent is ``pid`` (Linux /proc)."""
+    out = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if int(fields[1]) == pid:
+            out.append(int(stat.parent.name))
+    return out
+
+
+def _alive(pid):
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    return True
+
+
+def test_sigterm_stops_a_parallel_study_and_its_workers(tmp_path):
+    # Given a study whose two variants would step for tens of seconds, each in a spawned worker,
+    # checkpointing at every record (so a checkpoint file shows that a variant is stepping)
+    long = ["--set", "stages.impact.time.duration=0.05 s", "--set", "stages.impact.output.records=100",
+            "--set", "stages.impact.output.checkpoint=1e-9 s"]
+    cmd = [sys.executable, "-m", "demcli", "study", IMPACT, *TINY, *long, "--vary", f"{DT}=0.002,0.001",
+           "--metric", "impact.dem.kinetic@last", "--out", tmp_path, "--jobs", "2", "--cold", "--quiet"]
+    proc = subprocess.Popen([str(c) for c in cmd], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    folders = [tmp_path / "dt_factor=0.002", tmp_path / "dt_factor=0.001"]
+    deadline = time.monotonic() + 300  # a cold numba cache compiles first
+    while not all((f / "01-impact.ckpt.h5").exists() for f in folders):
+        assert proc.poll() is None and time.monotonic() < deadline, proc.communicate()
+        time.sleep(0.1)
+    workers = _children(proc.pid)
+    # When the study process alone gets SIGTERM (`kill`, a batch system's time limit)
+    proc.terminate()
+    _, err = proc.communicate(timeout=120)
+    # Then it stops with a message and no traceback,
+    assert proc.returncode == 1, err
+    assert "study interrupted" in err and "Traceback" not in err, err
+    # its workers stopped their variants there (through the checkpoint path) and are gone
+    assert not [f for f in folders if (f / "01-impact.h5").exists()]
+    assert all("interrupted at step" in (f / "log.txt").read_text() for f in folders)
+    assert len(workers) >= 2
+    deadline = time.monotonic() + 10  # multiprocessing's resource tracker leaves once its pipe closes
+    while [p for p in workers if _alive(p)] and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert not [p for p in workers if _alive(p)]
