@@ -126,7 +126,10 @@ def study(case, varies, metric, reference, overrides, out, jobs, threads_per_job
 @click.option("--quiet", is_flag=True, help="No progress lines; the status table is still printed.")
 def sweep(sweep_file, workers, scheduler, cluster_type, threads_per_run, out, force, resume, check_only, quiet):
     """Run the cases, seeds and values of SWEEP (a YAML file) on Dask; exit 1 if any run failed."""
+    from demcli.interrupts import stop_as_interrupt
     from demcli.sweep import check_sweep, run_sweep
+
+    stop_as_interrupt()  # SIGTERM as Ctrl-C: the cluster closes, its runs checkpoint, the tables are written
 
     if check_only:
         check_sweep(sweep_file, out=out, echo=click.echo)

@@ -6,7 +6,9 @@ closed by the code under test (--workers) or by the fixture that starts them (--
 
 import csv
 import os
+import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -261,3 +263,35 @@ def test_shipped_sweeps_validate():
     for path in sorted((BEADS.parent.parent / "sweeps").glob("*.yaml")):
         plan = check_sweep(path, echo=lambda line: None)
         assert plan.runs and not plan.invalid, path
+
+
+def test_sigterm_stops_a_sweep_like_ctrl_c(tmp_path):
+    # Given a sweep of two long runs on a local cluster, checkpointing at every record (so a
+    # checkpoint file shows that a run is stepping)
+    path = _sweep_file(tmp_path, """\
+metrics: [settle.dem.kinetic@last]
+set: {stages.settle.time.steps: 2000000, stages.settle.output.records: 400, stages.settle.output.checkpoint: 1e-9 s,
+      stages.settle.output.snapshots: 0}
+runs:
+  - case: CASE
+    seeds: [1, 2]
+""")
+    out = tmp_path / "out"
+    proc = subprocess.Popen([sys.executable, "-m", "demcli", "sweep", str(path), "--workers", "2", "--out", str(out)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    folders = [out / "beads" / "seed=1", out / "beads" / "seed=2"]
+    deadline = time.monotonic() + 300  # a cold numba cache compiles first
+    while not all((f / "01-settle.ckpt.h5").exists() for f in folders):
+        assert proc.poll() is None and time.monotonic() < deadline, proc.communicate()
+        time.sleep(0.1)
+    # When the sweep process gets SIGTERM (`kill`, a batch system's time limit)
+    proc.terminate()
+    table, err = proc.communicate(timeout=180)
+    # Then it stops as at Ctrl-C: exit 1, no traceback, the status table written with the runs
+    # marked as stopped, and the runs stopped through their checkpoint path
+    assert proc.returncode == 1, err
+    assert "Traceback" not in err, err
+    status = {r["run"]: r["status"] for r in _rows(out / "status.csv")}
+    assert set(status) == {"beads/seed=1", "beads/seed=2"} and "ok" not in status.values(), status
+    assert not [f for f in folders if (f / "01-settle.h5").exists()]
+    assert all("interrupted at step" in (f / "log.txt").read_text() for f in folders)
