@@ -1,5 +1,6 @@
 """Shared fixtures: a scratch run folder and the smoke cases."""
 
+import time
 from pathlib import Path
 
 import pytest
@@ -79,3 +80,18 @@ def interrupt_and_resume(monkeypatch):
         run_case(case, out=out, quiet=True, resume=True)
 
     return run
+
+
+def _wait_for_files(proc, paths, timeout=300.0):
+    """Wait until every path exists while ``proc`` (a subprocess.Popen) still runs; the
+    default timeout leaves room for a cold numba cache to compile first."""
+    deadline = time.monotonic() + timeout
+    while not all(Path(p).exists() for p in paths):
+        assert proc.poll() is None and time.monotonic() < deadline, proc.communicate()
+        time.sleep(0.1)
+
+
+@pytest.fixture
+def wait_for_files():
+    """:func:`_wait_for_files`: e.g. checkpoint files that show a child's runs are stepping."""
+    return _wait_for_files

@@ -357,7 +357,7 @@ def _alive(pid):
     return True
 
 
-def test_sigterm_stops_a_parallel_study_and_its_workers(tmp_path):
+def test_sigterm_stops_a_parallel_study_and_its_workers(tmp_path, wait_for_files):
     # Given a study whose two variants would step for tens of seconds, each in a spawned worker,
     # checkpointing at every record (so a checkpoint file shows that a variant is stepping)
     long = ["--set", "stages.impact.time.duration=0.05 s", "--set", "stages.impact.output.records=100",
@@ -366,10 +366,7 @@ def test_sigterm_stops_a_parallel_study_and_its_workers(tmp_path):
            "--metric", "impact.dem.kinetic@last", "--out", tmp_path, "--jobs", "2", "--cold", "--quiet"]
     proc = subprocess.Popen([str(c) for c in cmd], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     folders = [tmp_path / "dt_factor=0.002", tmp_path / "dt_factor=0.001"]
-    deadline = time.monotonic() + 300  # a cold numba cache compiles first
-    while not all((f / "01-impact.ckpt.h5").exists() for f in folders):
-        assert proc.poll() is None and time.monotonic() < deadline, proc.communicate()
-        time.sleep(0.1)
+    wait_for_files(proc, [f / "01-impact.ckpt.h5" for f in folders])
     workers = _children(proc.pid)
     # When the study process alone gets SIGTERM (`kill`, a batch system's time limit)
     proc.terminate()

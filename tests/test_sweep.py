@@ -8,7 +8,6 @@ import csv
 import os
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import pytest
@@ -265,7 +264,7 @@ def test_shipped_sweeps_validate():
         assert plan.runs and not plan.invalid, path
 
 
-def test_sigterm_stops_a_sweep_like_ctrl_c(tmp_path):
+def test_sigterm_stops_a_sweep_like_ctrl_c(tmp_path, wait_for_files):
     # Given a sweep of two long runs on a local cluster, checkpointing at every record (so a
     # checkpoint file shows that a run is stepping)
     path = _sweep_file(tmp_path, """\
@@ -280,13 +279,10 @@ runs:
     proc = subprocess.Popen([sys.executable, "-m", "demcli", "sweep", str(path), "--workers", "2", "--out", str(out)],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     folders = [out / "beads" / "seed=1", out / "beads" / "seed=2"]
-    deadline = time.monotonic() + 300  # a cold numba cache compiles first
-    while not all((f / "01-settle.ckpt.h5").exists() for f in folders):
-        assert proc.poll() is None and time.monotonic() < deadline, proc.communicate()
-        time.sleep(0.1)
+    wait_for_files(proc, [f / "01-settle.ckpt.h5" for f in folders])
     # When the sweep process gets SIGTERM (`kill`, a batch system's time limit)
     proc.terminate()
-    table, err = proc.communicate(timeout=180)
+    _, err = proc.communicate(timeout=180)
     # Then it stops as at Ctrl-C: exit 1, no traceback, the status table written with the runs
     # marked as stopped, and the runs stopped through their checkpoint path
     assert proc.returncode == 1, err
