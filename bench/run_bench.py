@@ -17,7 +17,8 @@ clump_500, 20000 steps, dt = 1e-6 s; the polyhedron scene poly_500, 10000 steps,
   threads (bench/bench_poly.py) against YADE Polyhedra (peers/yade/poly.py), --poly-steps.
 
 Then a scaling row (demcli, 1 thread, dense, N = 1e3, 1e4, 1e5 [1e6 with --big], the same
-number of steps for every N: the cost per particle-step should stay flat), the geometry
+number of steps for every N: the cost per particle-step should stay flat; LIGGGHTS beside it
+on the same N when installed, the one peer fast enough for 1e6), the geometry
 toolkit's bench/bench_sieve.py when it exists, and the 3D asphalt Marshall pipeline's wall time per
 stage against the lattice ball size (bench/bench_asphalt.py), and the cold/warm JIT
 compile time of `demcli run` on two smoke cases (bench/bench_jit.py), and the scenes no peer
@@ -31,7 +32,7 @@ The table (runs, median, ratio to LIGGGHTS) is printed and written to bench/resu
 Usage: python bench/run_bench.py [--quick] [--scenes dense_10000,clump_500] [--repeat K]
                                  [--skip-peers] [--skin S] [--peer-skin M] [--big]
                                  [--clump-settle STEPS] [--poly-steps STEPS] [--no-jit]
-                                 [--no-asphalt] [--asphalt-spacings 2.0,1.4,1.0,0.7]
+                                 [--no-asphalt] [--no-extras] [--asphalt-spacings 2.0,1.4,1.0,0.7]
 """
 
 import argparse
@@ -109,6 +110,9 @@ def parse_args(argv=None):
     ap.add_argument("--no-jit", action="store_true",
                     help="leave out bench/bench_jit.py (cold/warm compile time of two smoke cases, a few minutes; "
                          "never run with --quick)")
+    ap.add_argument("--no-extras", action="store_true",
+                    help="leave out the scenes no peer has (2D sections, ballast library, polyhedron narrow "
+                         "phase, bonded specimen)")
     ap.add_argument("--out", default=None, help="results file (default bench/results.md; --quick: none)")
     a = ap.parse_args(argv)
     if a.scenes is None:
@@ -425,18 +429,18 @@ def scene_table(entries, refs, repeat, a):
 
 
 def scaling_table(entries, repeat):
-    head = ["N", "steps", "particle-steps/s " + " / ".join(f"run{k + 1}" for k in range(repeat)), "median",
+    """One row per code and N; each code's cost is relative to its own smallest N."""
+    head = ["code", "N", "particle-steps/s " + " / ".join(f"run{k + 1}" for k in range(repeat)), "median",
             "ns per particle-step", "cost relative to first N", "contacts at end"]
     rows = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
-    first = None
+    first = {}
     for e in entries:
         med = e.median
-        if first is None and med:
-            first = med
+        if e.code not in first and med:
+            first[e.code] = med
         runs = " / ".join(fmt(r["rate"]) if r["rate"] is not None else "fail" for r in e.runs)
-        steps = e.cmd[4]
-        rel = f"{first / med:.2f}" if med and first else "—"
-        rows.append(f"| {e.scene.split('_')[1]} | {steps} | {runs} | {fmt(med)} | "
+        rel = f"{first[e.code] / med:.2f}" if med and e.code in first else "—"
+        rows.append(f"| {e.label()} | {e.scene.split('_')[1]} | {runs} | {fmt(med)} | "
                     f"{1e9 / med if med else float('nan'):.1f} | {rel} | {contacts(e)} |")
     return rows
 
@@ -577,7 +581,11 @@ def main(argv=None):
     if not a.no_scaling:
         ns = [1000, 10000] + ([] if a.quick else [100000]) + ([1000000] if a.big else [])
         scaling = [demcli_entries(a, "dense", n, a.scaling_steps, [1], False, env0)[0] for n in ns]
-        print(f"scaling row: demcli, 1 thread, dense, N = {', '.join(map(str, ns))}, {a.scaling_steps} steps")
+        if "liggghts" in installed and not a.skip_peers:
+            lig = argparse.Namespace(**{**vars(a), "peer_list": ["liggghts"]})
+            scaling += [peer_entries(lig, "dense", n, a.scaling_steps, installed, {}, work)[0] for n in ns]
+        print(f"scaling row: {', '.join(sorted({e.code for e in scaling}))}, 1 thread, dense, "
+              f"N = {', '.join(map(str, ns))}, {a.scaling_steps} steps")
         for k in range(1, a.repeat + 1):
             for e in scaling:
                 run_entry(e, k)
@@ -589,7 +597,7 @@ def main(argv=None):
     others = []
     quick_args = {"bench_polygons.py": ["--quick"], "bench_library.py": ["--quick"], "bench_polyhedra.py": [],
                   "bench_bonds.py": ["--steps", "2000"]}
-    for script, qargs in quick_args.items():
+    for script, qargs in ({} if a.no_extras else quick_args).items():
         cmd = [sys.executable, os.path.join(HERE, script)] + (qargs if a.quick else [])
         print(f"  [{time.strftime('%H:%M:%S')}] {script} (load {load()}) ...", flush=True)
         rec = run_proc(cmd, ROOT, dict(env0), a.timeout)
@@ -634,7 +642,7 @@ def main(argv=None):
         md += ["", f"Clump scene, fall phase ({a.clump_settle} steps) and state at the end of the window "
                    "(last run of each entry):", ""] + ctab
     if scaling:
-        md += ["", f"Scaling (demcli, 1 thread, dense scene, {a.scaling_steps} steps from the initial lattice; "
+        md += ["", f"Scaling (1 thread, dense scene, {a.scaling_steps} steps from the initial lattice; "
                    "the cost per particle-step should stay flat):", ""]
         md += scaling_table(scaling, a.repeat)
     if sieve:
