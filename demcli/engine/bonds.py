@@ -35,14 +35,18 @@ for _name, _kind, _dims, _unit, _doc, _kw in [
         ("state", "i", ("n_bd",), "", "0 intact, 1 broken in tension, 2 broken in shear", {"dtype": "int8"}),
         ("force_n", "f", ("n_bd",), "N", "normal force on i, compression positive (Burgers: tension element "
                                          "force)", {}),
-        ("force_s", "f", ("n_bd", 3), "N", "shear force on i", {}),
+        ("force_s", "f", ("n_bd", 3), "N", "shear force on i (a seated broken bond: its contact's tangential "
+                                           "spring)", {}),
         ("moment_t", "f", ("n_bd",), "N m", "twist moment on i about the normal (parallel bond)", {}),
-        ("moment_b", "f", ("n_bd", 3), "N m", "bending moment on i (parallel bond)", {}),
+        ("moment_b", "f", ("n_bd", 3), "N m", "bending moment on i (parallel bond; a seated broken bond: its "
+                                             "contact's rolling moment)", {}),
         ("kelvin_n", "f", ("n_bd",), "m", "Kelvin displacement in normal tension (Burgers)", {}),
         ("kelvin_s", "f", ("n_bd", 3), "m", "Kelvin displacement in shear (Burgers)", {}),
         ("separation", "f", ("n_bd",), "m", "gap between the spheres at the last step, 0 when touching", {}),
         ("overlap0", "f", ("n_bd",), "m", "reference overlap delta_0 of a contact bond: F_n = k_n (delta - "
-                                          "delta_0); the overlap at creation when installed stress-free, else 0",
+                                          "delta_0); the overlap at creation when installed stress-free, else 0; "
+                                          "kept after it breaks (the contact law acts on delta - delta_0) until "
+                                          "the spheres come apart",
          {})]:
     register(Field(f"bonds/{_name}", _kind, _dims, _unit, _doc, writer="effect bonds", **_kw))
 
@@ -135,7 +139,7 @@ class BondSet:
         rstart, rlist = build_reverse(len(self.start) - 1, self.j)
         n = len(self.j)
         return (self.start, self.j, rstart, rlist, self.model, self.state, self.hist,
-                np.zeros((n, 3)), np.zeros((n, 3)), np.zeros(n))
+                np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 2)))
 
     def kernel_table(self, dt):
         """(n_bm, N_BTABLE) model table with the Burgers step coefficients for ``dt`` appended
@@ -157,6 +161,17 @@ class BondSet:
         models = {"kind": kinds, "materials": self.materials.copy(),
                   "param_names": np.array(PARAM_NAMES, dtype=object), "params": self.prm.copy()}
         return {"bonds": g, "bond_models": models}
+
+    def replacing(self):
+        """(n_bd,) bool: bonds that keep their pair out of the contact list (intact contact and
+        Burgers bonds; broken stress-free contact bonds still seated, delta_0 > 0)."""
+        kind = self.prm[self.model, B.B_KIND] if len(self.j) else np.zeros(0)
+        intact = self.state == B.INTACT
+        return (intact & (kind != B.PARALLEL_BOND)) | (~intact & (kind == B.CONTACT_BOND) & (self.hist[:, B.H_D0] > 0))
+
+    def seated(self):
+        """(n_bd,) bool: broken stress-free contact bonds whose pair has not come apart yet."""
+        return (self.state != B.INTACT) & self.replacing()
 
     def counts(self):
         """{intact, broken_tension, broken_shear}."""

@@ -250,14 +250,12 @@ class System(BodySystem):
         no force at their installed overlap (:meth:`BondSet.bond_touching`)."""
         if not self.plan.has("bonds"):
             raise ValueError("bonds are not an effect of this stage")
-        from demcli.kernels.bonds import B_KIND, PARALLEL_BOND
-
         n = self.bonds.bond_touching(self.xs, self.rad, self.smat, self.sbody, gap, fraction, rng, stress_free)
         self._bond_arrays = self.bonds.kernel_arrays()
         self._fresh_lists = True
         # contacts a bond now replaces are no longer contacts (the rebuilt list leaves them out)
         bd = self.bonds
-        replaces = bd.prm[bd.model, B_KIND] != PARALLEL_BOND
+        replaces = bd.replacing()
         bonded = set(zip(bd.i[replaces].tolist(), bd.j[replaces].tolist()))
         nl = self.nl
         for c in np.nonzero(nl[K.NL_ACT])[0]:
@@ -337,7 +335,7 @@ class System(BodySystem):
         from demcli.kernels.step import run_steps
 
         w = self.walls
-        intact = self.bonds.state == 0
+        replacing = self.bonds.replacing()
         status, done, self.time, self.nl = run_steps(
             int(nsteps), self.time, self.dt, self.law, self.flags, self.prm, self.gravity,
             float(self.dyn.local_damping), float(self.dyn.viscous_damping),
@@ -353,8 +351,8 @@ class System(BodySystem):
         self._fresh_lists = False
         self.prime = False
         self.step += int(done)
-        if len(self.bonds) and not np.array_equal(intact, self.bonds.state == 0):
-            self._fresh_lists = True  # a bond broke: its pair joins the contact list at the next step
+        if len(self.bonds) and not np.array_equal(replacing, self.bonds.replacing()):
+            self._fresh_lists = True  # a bond broke or a seated pair came apart: it joins the contact list
         return int(status), int(done)
 
     # ---- measures -------------------------------------------------------------------
@@ -379,8 +377,9 @@ class System(BodySystem):
         nl = self.nl
         w = self.walls
         bd = self.bonds
-        eb = float(bond_strain_energy(bd.start, bd.j, bd.model, bd.state, bd.hist, bd.prm, self.xs, self.rad)) \
-            if len(bd) else 0.0
+        eb = float(bond_strain_energy(bd.start, bd.j, bd.model, bd.state, bd.hist, bd.prm, self.xs, self.rad,
+                                      self.smat, self.prm, self.law, self.flags[K.F_FRICTION],
+                                      self.flags[K.F_ROLLING])) if len(bd) else 0.0
         return eb + float(total_strain_energy(
             nl[K.NL_PI], nl[K.NL_PJ], self.xs, self.rad, self.smat, self.prm, self.law, nl[K.NL_FT], nl[K.NL_MR],
             self.flags[K.F_FRICTION], self.flags[K.F_ROLLING], nl[K.NL_WSTART], nl[K.NL_WWALL], w.kind, self.wpoint,
@@ -399,7 +398,8 @@ class System(BodySystem):
                               ba[0], ba[1], ba[7]) / volume
 
     def contacts_per_sphere(self):
-        """(n_s,) touching sphere-sphere contacts and intact bonds of each sphere."""
+        """(n_s,) touching sphere-sphere contacts, intact bonds and seated pairs in compression
+        beyond their delta_0 (a force at the last step) of each sphere."""
         nl = self.nl
         act = nl[K.NL_ACT].astype(bool)
         n = len(self.rad)
@@ -408,7 +408,7 @@ class System(BodySystem):
         if len(bd):
             from demcli.kernels.bonds import INTACT
 
-            ok = bd.state == INTACT
+            ok = (bd.state == INTACT) | (bd.seated() & np.any(self._bond_arrays[7] != 0.0, axis=1))
             z = z + np.bincount(bd.i[ok], minlength=n) + np.bincount(bd.j[ok], minlength=n)
         return z
 

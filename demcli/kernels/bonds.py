@@ -17,7 +17,14 @@ Models (``B_KIND`` of a model row, PFC's bond models; Potyondy & Cundall 2004):
   (PFC's reference gap: zero force at the installed separation); breaks in tension when
   -F_n >= s_n and in shear when |F_s| >= s_s (strengths in N); force only, no moment.
   Once broken, the pair is an ordinary contact of the stage's contact law (linear with
-  slip in the asphalt cases).
+  slip in the asphalt cases). A stress-free bond (delta_0 > 0) that breaks leaves its pair
+  *seated*: the bond pass keeps it and applies the stage's contact law to the overlap beyond
+  the reference, delta - delta_0 (zero force for 0 < delta <= delta_0; PFC's linear model
+  keeps its reference gap after the bond breaks in the same way), with the history in the
+  bond's ``H_FS`` (tangential spring) and ``H_MB`` (rolling moment) columns, until the
+  spheres come apart (delta <= 0): then delta_0 is cleared and the pair joins the contact
+  list. Without this a broken stress-free bond would hand the contact law the full overlap
+  delta_0 it was installed on (up to ~r in the asphalt mastic) and fire the pair apart.
 * ``PARALLEL_BOND`` -- a disc of radius R = lambda min(r_i, r_j) in parallel with the
   contact (which the contact law keeps computing): A = pi R^2, I = pi R^4 / 4,
   J = pi R^4 / 2; increments from the bond's creation dF_n = -kn_b A v_n dt,
@@ -43,7 +50,7 @@ import numpy as np
 from numba import prange
 
 from demcli.jit import njit
-from demcli.kernels.contact import _to_tangent_plane, pair_kinematics
+from demcli.kernels.contact import _to_tangent_plane, contact_law, pair_kinematics, strain_energy
 
 CONTACT_BOND = 0
 PARALLEL_BOND = 1
@@ -82,7 +89,7 @@ H_MB = 5       # bending moment on i [N m], 3 columns (parallel bond)
 H_UKN = 8      # Kelvin displacement, normal tension [m] (Burgers)
 H_UKS = 9      # Kelvin displacement, shear [m], 3 columns (Burgers)
 H_SEP = 12     # separation max(-delta, 0) at the last step [m] (Burgers)
-H_D0 = 13      # reference overlap delta_0 [m] (contact bond; 0: installed loaded)
+H_D0 = 13      # reference overlap delta_0 [m] (contact bond; 0: installed loaded; kept when it breaks)
 N_HIST = 14
 
 # state of a bond
@@ -302,30 +309,59 @@ def bond_law(p, hist, b, delta, nx, ny, nz, vx, vy, vz, wx, wy, wz, ri, rj, dt):
     hist[b, H_FS] = sx
     hist[b, H_FS + 1] = sy
     hist[b, H_FS + 2] = sz
-    if state != INTACT:  # the energy the bond held is lost with it
-        e_diss += bond_energy(p, hist, b, delta, ri, rj)
+    if state != INTACT:
+        # The energy the bond holds is lost with it, and the work its force F and moment M would
+        # have done in the step's second half kick, 0.5 dt (F . v + M . w): the integrator
+        # applies no force this step (trapezoid work 0.5 dt F_n . v), the spring energy fell by
+        # 0.5 dt (F_n + F) . v (exact for a linear spring); without the term the balance was off
+        # by that much at every break, first order in dt. delta_0 stays (a seated pair).
+        fx = fn * nx + sx
+        fy = fn * ny + sy
+        fz = fn * nz + sz
+        e_diss += bond_energy(p, hist, b, delta, ri, rj) + 0.5 * dt * (fx * vx + fy * vy + fz * vz
+                                                                       + mx * wx + my * wy + mz * wz)
+        d0 = hist[b, H_D0]
         for col in range(N_HIST):
             hist[b, col] = 0.0
+        hist[b, H_D0] = d0
         return 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, e_diss, state
     return fn * nx + sx, fn * ny + sy, fn * nz + sz, mx, my, mz, e_diss, state
 
 
+@njit(inline="always")
+def replaces_contact(kind, state, d0):
+    """Whether a bond keeps its pair out of the contact list: an intact contact or Burgers
+    bond, or a broken stress-free contact bond still seated (delta_0 > 0)."""
+    if state == INTACT:
+        return kind != PARALLEL_BOND
+    return kind == CONTACT_BOND and d0 > 0.0
+
+
 @njit(parallel=True)
-def bond_pass(bstart, bj, bmodel, bstate, hist, bprm, xs, vs, ws, rad, dt, bfc, btj, bed,
-              frow, trow, erow, energy, broke):
-    """Every intact bond's force into its own row; i's side summed into frow/trow/erow[i].
+def bond_pass(bstart, bj, bmodel, bstate, hist, bprm, xs, vs, ws, rad, smat, smass, prm, law, dt,
+              friction, rolling, bfc, btj, bed, frow, trow, erow, energy, broke):
+    """Every intact or seated bond's force into its own row; i's side summed into
+    frow/trow/erow[i].
 
     Runs after the pair pass (which wrote frow[i] and trow[i]) and before
     :func:`bond_gather`; rows of the bond CSR are owned by i, so it is race-free and the
     sums keep a fixed order. A bond that breaks sets its state and ``broke[0]`` (the pair
-    list is rebuilt so that the pair becomes an ordinary contact).
+    list is rebuilt so that the pair becomes an ordinary contact). A seated pair (a broken
+    stress-free contact bond, module docstring) gets the stage's contact law
+    (``law``, ``prm`` as in the pair pass) on delta - delta_0 until delta <= 0, when it is
+    released (delta_0 cleared, ``broke[0]`` set). ``bed[b]``: (damping, friction) losses [J].
     """
+    fts = hist[:, H_FS:H_FS + 3]   # a seated pair's tangential spring [N]
+    mrs = hist[:, H_MB:H_MB + 3]   # and rolling moment [N m]
     for i in prange(bstart.shape[0] - 1):
         ri = rad[i]
         for b in range(bstart[i], bstart[i + 1]):
-            if bstate[b] != INTACT:  # its rows stay zero since it broke
+            state = bstate[b]
+            d0 = hist[b, H_D0]
+            if state != INTACT and d0 <= 0.0:  # released: its rows stay zero since it broke
                 if energy:
-                    bed[b] = 0.0
+                    bed[b, 0] = 0.0
+                    bed[b, 1] = 0.0
                 continue
             j = bj[b]
             rj = rad[j]
@@ -340,11 +376,42 @@ def bond_pass(bstart, bj, bmodel, bstate, hist, bprm, xs, vs, ws, rad, dt, bfc, 
             ai = ri - 0.5 * delta
             aj = rj - 0.5 * delta
             vx, vy, vz, wx, wy, wz = pair_kinematics(vs, ws, i, j, nx, ny, nz, ai, aj)
-            fx, fy, fz, mx, my, mz, ed, state = bond_law(
-                bprm[bmodel[b]], hist, b, delta, nx, ny, nz, vx, vy, vz, wx, wy, wz, ri, rj, dt)
-            if state != INTACT:
-                bstate[b] = state
+            pm = prm[smat[i], smat[j]]
+            rstar = ri * rj / (ri + rj)
+            ef = 0.0
+            if state == INTACT:
+                fx, fy, fz, mx, my, mz, ed, state = bond_law(
+                    bprm[bmodel[b]], hist, b, delta, nx, ny, nz, vx, vy, vz, wx, wy, wz, ri, rj, dt)
+                if state != INTACT:
+                    bstate[b] = state
+                    broke[0] = 1
+                    if d0 > 0.0 and delta > d0:
+                        # the seated contact takes over the compression beyond delta_0 in this
+                        # step: its spring energy and the work of its force in the second half
+                        # kick move over from the bond's loss (bond_law's break term)
+                        mi = smass[i]
+                        mj = smass[j]
+                        fx, fy, fz, mx, my, mz, ec, ef = contact_law(
+                            law, pm, delta - d0, nx, ny, nz, vx, vy, vz, wx, wy, wz, rstar, mi * mj / (mi + mj),
+                            dt, fts, mrs, b, friction, rolling)
+                        ed += ec - strain_energy(law, pm, delta - d0, rstar, fts, mrs, b, friction, rolling) \
+                            - 0.5 * dt * (fx * vx + fy * vy + fz * vz + mx * wx + my * wy + mz * wz)
+            elif delta <= 0.0:  # the seated pair has come apart: an ordinary contact from now on
+                for col in range(N_HIST):
+                    hist[b, col] = 0.0
                 broke[0] = 1
+                fx = fy = fz = mx = my = mz = ed = 0.0
+            elif delta > d0:
+                mi = smass[i]
+                mj = smass[j]
+                fx, fy, fz, mx, my, mz, ed, ef = contact_law(
+                    law, pm, delta - d0, nx, ny, nz, vx, vy, vz, wx, wy, wz, rstar, mi * mj / (mi + mj), dt,
+                    fts, mrs, b, friction, rolling)
+            else:  # seated, no compression beyond delta_0: open, the contact history is dropped
+                for col in range(3):
+                    fts[b, col] = 0.0
+                    mrs[b, col] = 0.0
+                fx = fy = fz = mx = my = mz = ed = 0.0
             cx = ny * fz - nz * fy
             cy = nz * fx - nx * fz
             cz = nx * fy - ny * fx
@@ -361,13 +428,15 @@ def bond_pass(bstart, bj, bmodel, bstate, hist, bprm, xs, vs, ws, rad, dt, bfc, 
             trow[i, 1] += -ai * cy + my
             trow[i, 2] += -ai * cz + mz
             if energy:
-                bed[b] = ed
+                bed[b, 0] = ed
+                bed[b, 1] = ef
                 erow[i, 0] += ed
+                erow[i, 1] += ef
 
 
 @njit(parallel=True)
 def bond_gather(brstart, brlist, bfc, btj, bed, frow, trow, erow, energy):
-    """j's side of every bond into frow/trow/erow[j] (fixed order, race-free); broken
+    """j's side of every bond into frow/trow/erow[j] (fixed order, race-free); released
     bonds have zero rows."""
     for j in prange(brstart.shape[0] - 1):
         for a in range(brstart[j], brstart[j + 1]):
@@ -379,12 +448,14 @@ def bond_gather(brstart, brlist, bfc, btj, bed, frow, trow, erow, energy):
             trow[j, 1] += btj[b, 1]
             trow[j, 2] += btj[b, 2]
             if energy:
-                erow[j, 0] += bed[b]
+                erow[j, 0] += bed[b, 0]
+                erow[j, 1] += bed[b, 1]
 
 
 @njit
-def drop_bonded(start, pi, pj, bstart, bj, bmodel, bstate, bprm):
-    """The pair list without the pairs an intact contact or Burgers bond replaces.
+def drop_bonded(start, pi, pj, bstart, bj, bmodel, bstate, bhist, bprm):
+    """The pair list without the pairs a bond replaces (:func:`replaces_contact`: intact
+    contact and Burgers bonds, seated broken contact bonds).
 
     Both lists are CSR by i and sorted by j inside a row; parallel bonds act beside the
     contact and keep their pair. Returns (start, pi, pj) of the kept pairs.
@@ -397,7 +468,7 @@ def drop_bonded(start, pi, pj, bstart, bj, bmodel, bstate, bprm):
         for c in range(start[i], start[i + 1]):
             while b < b1 and bj[b] < pj[c]:
                 b += 1
-            if b < b1 and bj[b] == pj[c] and bstate[b] == INTACT and bprm[bmodel[b], B_KIND] != PARALLEL_BOND:
+            if b < b1 and bj[b] == pj[c] and replaces_contact(bprm[bmodel[b], B_KIND], bstate[b], bhist[b, H_D0]):
                 keep[c] = False
     nstart = np.zeros(n + 1, np.int64)
     for i in range(n):
@@ -411,14 +482,22 @@ def drop_bonded(start, pi, pj, bstart, bj, bmodel, bstate, bprm):
 
 
 @njit
-def bond_strain_energy(bstart, bj, bmodel, bstate, hist, bprm, xs, rad):
-    """Elastic energy held by all intact bonds [J] (serial, fixed order)."""
+def bond_strain_energy(bstart, bj, bmodel, bstate, hist, bprm, xs, rad, smat, prm, law, friction, rolling):
+    """Elastic energy held by all intact bonds and seated pairs [J] (serial, fixed order)."""
+    fts = hist[:, H_FS:H_FS + 3]
+    mrs = hist[:, H_MB:H_MB + 3]
     e = 0.0
     for i in range(bstart.shape[0] - 1):
         for b in range(bstart[i], bstart[i + 1]):
-            if bstate[b] != INTACT:
+            d0 = hist[b, H_D0]
+            if bstate[b] != INTACT and d0 <= 0.0:
                 continue
             j = bj[b]
             d = math.sqrt((xs[i, 0] - xs[j, 0]) ** 2 + (xs[i, 1] - xs[j, 1]) ** 2 + (xs[i, 2] - xs[j, 2]) ** 2)
-            e += bond_energy(bprm[bmodel[b]], hist, b, rad[i] + rad[j] - d, rad[i], rad[j])
+            delta = rad[i] + rad[j] - d
+            if bstate[b] == INTACT:
+                e += bond_energy(bprm[bmodel[b]], hist, b, delta, rad[i], rad[j])
+            elif delta > d0:
+                e += strain_energy(law, prm[smat[i], smat[j]], delta - d0, rad[i] * rad[j] / (rad[i] + rad[j]),
+                                   fts, mrs, b, friction, rolling)
     return e

@@ -716,7 +716,7 @@ def run_steps(nsteps, time, dt, law, flags, prm, gravity, local, visc,
             rebuild[0] = 0
             nstart, npi, npj = build_pairs(xs, rad, sbody, skin, max_cells)
             if bonds:
-                nstart, npi, npj = drop_bonded(nstart, npi, npj, bstart, bj, bmodel, bstate, bprm)
+                nstart, npi, npj = drop_bonded(nstart, npi, npj, bstart, bj, bmodel, bstate, bhist, bprm)
             npair = npi.shape[0]
             nft = np.zeros((npair if friction else 0, 3))
             nmr = np.zeros((npair if rolling else 0, 3))
@@ -750,8 +750,8 @@ def run_steps(nsteps, time, dt, law, flags, prm, gravity, local, visc,
         if bonds:
             if not (friction or rolling):
                 trow[:, :] = 0.0
-            bond_pass(bstart, bj, bmodel, bstate, bhist, bprm, xs, vs, ws, rad, h, bfc, btj, bed,
-                      frow, trow, erow, energy, broke)
+            bond_pass(bstart, bj, bmodel, bstate, bhist, bprm, xs, vs, ws, rad, smat, smass, prm, law, h,
+                      friction, rolling, bfc, btj, bed, frow, trow, erow, energy, broke)
             bond_gather(brstart, brlist, bfc, btj, bed, frow, trow, erow, energy)
             if broke[0]:
                 broke[0] = 0
