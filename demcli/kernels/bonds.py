@@ -376,42 +376,43 @@ def bond_pass(bstart, bj, bmodel, bstate, hist, bprm, xs, vs, ws, rad, smat, sma
             ai = ri - 0.5 * delta
             aj = rj - 0.5 * delta
             vx, vy, vz, wx, wy, wz = pair_kinematics(vs, ws, i, j, nx, ny, nz, ai, aj)
-            pm = prm[smat[i], smat[j]]
-            rstar = ri * rj / (ri + rj)
             ef = 0.0
+            took_over = False  # the bond broke this step and its seated contact acts at once
+            seated_force = False
             if state == INTACT:
                 fx, fy, fz, mx, my, mz, ed, state = bond_law(
                     bprm[bmodel[b]], hist, b, delta, nx, ny, nz, vx, vy, vz, wx, wy, wz, ri, rj, dt)
                 if state != INTACT:
                     bstate[b] = state
                     broke[0] = 1
-                    if d0 > 0.0 and delta > d0:
-                        # the seated contact takes over the compression beyond delta_0 in this
-                        # step: its spring energy and the work of its force in the second half
-                        # kick move over from the bond's loss (bond_law's break term)
-                        mi = smass[i]
-                        mj = smass[j]
-                        fx, fy, fz, mx, my, mz, ec, ef = contact_law(
-                            law, pm, delta - d0, nx, ny, nz, vx, vy, vz, wx, wy, wz, rstar, mi * mj / (mi + mj),
-                            dt, fts, mrs, b, friction, rolling)
-                        ed += ec - strain_energy(law, pm, delta - d0, rstar, fts, mrs, b, friction, rolling) \
-                            - 0.5 * dt * (fx * vx + fy * vy + fz * vz + mx * wx + my * wy + mz * wz)
+                    took_over = seated_force = d0 > 0.0 and delta > d0
             elif delta <= 0.0:  # the seated pair has come apart: an ordinary contact from now on
                 for col in range(N_HIST):
                     hist[b, col] = 0.0
                 broke[0] = 1
                 fx = fy = fz = mx = my = mz = ed = 0.0
             elif delta > d0:
-                mi = smass[i]
-                mj = smass[j]
-                fx, fy, fz, mx, my, mz, ed, ef = contact_law(
-                    law, pm, delta - d0, nx, ny, nz, vx, vy, vz, wx, wy, wz, rstar, mi * mj / (mi + mj), dt,
-                    fts, mrs, b, friction, rolling)
+                seated_force = True
             else:  # seated, no compression beyond delta_0: open, the contact history is dropped
                 for col in range(3):
                     fts[b, col] = 0.0
                     mrs[b, col] = 0.0
                 fx = fy = fz = mx = my = mz = ed = 0.0
+            if seated_force:
+                pm = prm[smat[i], smat[j]]
+                rstar = ri * rj / (ri + rj)
+                mi = smass[i]
+                mj = smass[j]
+                fx, fy, fz, mx, my, mz, ec, ef = contact_law(
+                    law, pm, delta - d0, nx, ny, nz, vx, vy, vz, wx, wy, wz, rstar, mi * mj / (mi + mj), dt,
+                    fts, mrs, b, friction, rolling)
+                if took_over:
+                    # its spring energy and the work of its force in the second half kick move
+                    # over from the bond's loss (bond_law's break term)
+                    ed += ec - strain_energy(law, pm, delta - d0, rstar, fts, mrs, b, friction, rolling) \
+                        - 0.5 * dt * (fx * vx + fy * vy + fz * vz + mx * wx + my * wy + mz * wz)
+                else:
+                    ed = ec
             cx = ny * fz - nz * fy
             cy = nz * fx - nx * fz
             cz = nx * fy - ny * fx
