@@ -4,8 +4,9 @@ The kernels are in :mod:`demcli.kernels.bonds`. A :class:`BondSet` holds the bon
 (CSR by the first sphere, sorted by the second, with the reverse list for the gather),
 each bond's model row, state (intact or the mode it broke in) and history, and the model
 table. Bonds live in the state groups ``bonds`` and ``bond_models`` and carry over from
-stage to stage with their history, like contacts; broken bonds stay in the list (with
-zero force) so that the failure counts by mode survive.
+stage to stage with their history, like contacts; broken bonds stay in the list so that the
+failure counts by mode survive (with zero force, except a seated pair: a broken stress-free
+contact bond whose spheres have not parted, :mod:`demcli.kernels.bonds`).
 """
 
 import math
@@ -34,7 +35,7 @@ for _name, _kind, _dims, _unit, _doc, _kw in [
         ("model", "i", ("n_bd",), "", "row of bond_models", {"index_of": "n_bm"}),
         ("state", "i", ("n_bd",), "", "0 intact, 1 broken in tension, 2 broken in shear", {"dtype": "int8"}),
         ("force_n", "f", ("n_bd",), "N", "normal force on i, compression positive (Burgers: tension element "
-                                         "force)", {}),
+                                         "force); 0 once broken", {}),
         ("force_s", "f", ("n_bd", 3), "N", "shear force on i (a seated broken bond: its contact's tangential "
                                            "spring)", {}),
         ("moment_t", "f", ("n_bd",), "N m", "twist moment on i about the normal (parallel bond)", {}),

@@ -398,18 +398,20 @@ class System(BodySystem):
                               ba[0], ba[1], ba[7]) / volume
 
     def contacts_per_sphere(self):
-        """(n_s,) touching sphere-sphere contacts, intact bonds and seated pairs in compression
-        beyond their delta_0 (a force at the last step) of each sphere."""
+        """(n_s,) touching sphere-sphere contacts, intact bonds and seated pairs compressed beyond
+        their delta_0 of each sphere."""
         nl = self.nl
         act = nl[K.NL_ACT].astype(bool)
         n = len(self.rad)
         z = np.bincount(nl[K.NL_PI][act], minlength=n) + np.bincount(nl[K.NL_PJ][act], minlength=n)
         bd = self.bonds
         if len(bd):
-            from demcli.kernels.bonds import INTACT
+            from demcli.kernels import bonds as B
 
-            ok = (bd.state == INTACT) | (bd.seated() & np.any(self._bond_arrays[7] != 0.0, axis=1))
-            z = z + np.bincount(bd.i[ok], minlength=n) + np.bincount(bd.j[ok], minlength=n)
+            i, j = bd.i, bd.j
+            delta = self.rad[i] + self.rad[j] - np.linalg.norm(self.xs[i] - self.xs[j], axis=1)
+            ok = (bd.state == B.INTACT) | (bd.seated() & (delta > bd.hist[:, B.H_D0]))
+            z = z + np.bincount(i[ok], minlength=n) + np.bincount(j[ok], minlength=n)
         return z
 
     def scale_radii(self, factor):

@@ -408,9 +408,13 @@ def bond_pass(bstart, bj, bmodel, bstate, hist, bprm, xs, vs, ws, rad, smat, sma
                     fts, mrs, b, friction, rolling)
                 if took_over:
                     # its spring energy and the work of its force in the second half kick move
-                    # over from the bond's loss (bond_law's break term)
-                    ed += ec - strain_energy(law, pm, delta - d0, rstar, fts, mrs, b, friction, rolling) \
+                    # over from the bond's loss (bond_law's break term); that work holds half the
+                    # step's dashpot and slip losses, so the step books the other half of each,
+                    # the same half-step lead as the first step of any contact (it cancels when
+                    # the contact ends)
+                    ed += 0.5 * ec - strain_energy(law, pm, delta - d0, rstar, fts, mrs, b, friction, rolling) \
                         - 0.5 * dt * (fx * vx + fy * vy + fz * vz + mx * wx + my * wy + mz * wz)
+                    ef *= 0.5
                 else:
                     ed = ec
             cx = ny * fz - nz * fy

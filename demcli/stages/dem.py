@@ -713,7 +713,7 @@ def integrate(ctx, cfg, state_in, hooks=None):
     if plan.has("adaptive_damping"):
         cols["alpha"] = "1/s"
     if plan.has("bonds"):
-        cols.update({"bonds_intact": "1", "broken_tension": "1", "broken_shear": "1"})
+        cols.update({"bonds_intact": "1", "broken_tension": "1", "broken_shear": "1", "bonds_seated": "1"})
     cols.update(hooks.columns)
     if ckpt is not None:
         table = RecordTable.from_state(ckpt, "dem")
@@ -748,7 +748,7 @@ def integrate(ctx, cfg, state_in, hooks=None):
         if plan.has("bonds"):
             c = system.bonds.counts()
             row.update({"bonds_intact": c["intact"], "broken_tension": c["broken_tension"],
-                        "broken_shear": c["broken_shear"]})
+                        "broken_shear": c["broken_shear"], "bonds_seated": int(system.bonds.seated().sum())})
         if hooks.row is not None:
             row.update(hooks.row(system))
         table.append(row)
