@@ -148,8 +148,8 @@ def burgers_coefficients(km, cm, kk, ck, dt):
 
 
 @njit(inline="always")
-def burgers_step(s, uk, du, dt, cf, k, km, kk):
-    """One step of a Burgers element with the coefficients cf[k:k+6] of
+def burgers_step(s, uk, du, dt, cf, m, k, km, kk):
+    """One step of a Burgers element with the coefficients cf[m, k:k+6] of
     :func:`burgers_coefficients` for this dt; dt = 0 (a step of zero length, the engine's
     priming pass) takes du as a jump: the dashpots are rigid, s += K_m du.
 
@@ -157,8 +157,8 @@ def burgers_step(s, uk, du, dt, cf, k, km, kk):
     the energy stored in the springs, s^2 / (2 K_m) + K_k u_k^2 / 2.
     """
     if dt > 0.0:
-        s1 = cf[k] * s + cf[k + 1] * uk + cf[k + 4] * du
-        uk1 = cf[k + 2] * s + cf[k + 3] * uk + cf[k + 5] * du
+        s1 = cf[m, k] * s + cf[m, k + 1] * uk + cf[m, k + 4] * du
+        uk1 = cf[m, k + 2] * s + cf[m, k + 3] * uk + cf[m, k + 5] * du
     else:
         s1 = s + km * du
         uk1 = uk
@@ -170,8 +170,8 @@ def burgers_step(s, uk, du, dt, cf, k, km, kk):
 def burgers_update(s, uk, du, dt, km, cm, kk, ck):
     """One step of a Burgers element driven by the displacement increment ``du`` [m] spread
     evenly over dt (:func:`burgers_coefficients` computed for this one step)."""
-    cf = np.array(burgers_coefficients(km, cm, kk, ck, dt))
-    return burgers_step(s, uk, du, dt, cf, 0, km, kk)
+    cf = np.array(burgers_coefficients(km, cm, kk, ck, dt)).reshape(1, 6)
+    return burgers_step(s, uk, du, dt, cf, 0, 0, km, kk)
 
 
 @njit(inline="always")
@@ -181,33 +181,36 @@ def _rotate_vec(h, b, col, nx, ny, nz):
 
 
 @njit(inline="always")
-def bond_energy(p, hist, b, delta, ri, rj):
-    """Elastic energy stored in bond b [J] (springs only; dashpots store none)."""
-    kind = p[B_KIND]
+def bond_energy(bprm, m, hist, b, delta, ri, rj):
+    """Elastic energy stored in bond b of model m (row of bprm) [J] (springs only; dashpots
+    store none)."""
+    kind = bprm[m, B_KIND]
     fs2 = hist[b, H_FS] ** 2 + hist[b, H_FS + 1] ** 2 + hist[b, H_FS + 2] ** 2
     if kind == CONTACT_BOND:
         du = delta - hist[b, H_D0]
-        return 0.5 * p[B_KN] * du * du + 0.5 * fs2 / p[B_KS]
+        return 0.5 * bprm[m, B_KN] * du * du + 0.5 * fs2 / bprm[m, B_KS]
     if kind == PARALLEL_BOND:
-        rb = p[B_LAMBDA] * min(ri, rj)
+        rb = bprm[m, B_LAMBDA] * min(ri, rj)
         area = math.pi * rb * rb
         inert = 0.25 * area * rb * rb
         mb2 = hist[b, H_MB] ** 2 + hist[b, H_MB + 1] ** 2 + hist[b, H_MB + 2] ** 2
-        return 0.5 * (hist[b, H_FN] ** 2 / (p[B_PKN] * area) + fs2 / (p[B_PKS] * area)
-                      + hist[b, H_MT] ** 2 / (p[B_PKS] * 2.0 * inert) + mb2 / (p[B_PKN] * inert))
+        return 0.5 * (hist[b, H_FN] ** 2 / (bprm[m, B_PKN] * area) + fs2 / (bprm[m, B_PKS] * area)
+                      + hist[b, H_MT] ** 2 / (bprm[m, B_PKS] * 2.0 * inert) + mb2 / (bprm[m, B_PKN] * inert))
     uks2 = hist[b, H_UKS] ** 2 + hist[b, H_UKS + 1] ** 2 + hist[b, H_UKS + 2] ** 2
-    e = 0.5 * fs2 / p[B_KMS] + 0.5 * p[B_KKS] * uks2
+    e = 0.5 * fs2 / bprm[m, B_KMS] + 0.5 * bprm[m, B_KKS] * uks2
     if delta >= 0.0:
-        return e + 0.5 * p[B_KN] * delta * delta
-    return e + 0.5 * hist[b, H_FN] ** 2 / p[B_KMN] + 0.5 * p[B_KKN] * hist[b, H_UKN] ** 2
+        return e + 0.5 * bprm[m, B_KN] * delta * delta
+    return e + 0.5 * hist[b, H_FN] ** 2 / bprm[m, B_KMN] + 0.5 * bprm[m, B_KKN] * hist[b, H_UKN] ** 2
 
 
 @njit
-def bond_law(p, hist, b, delta, nx, ny, nz, vx, vy, vz, wx, wy, wz, ri, rj, dt):
+def bond_law(bprm, m, hist, b, delta, nx, ny, nz, vx, vy, vz, wx, wy, wz, ri, rj, dt):
     """Force and moment on i from bond b; updates its history row in place.
 
     Args:
-        p: (N_BTABLE,) model row with the Burgers coefficients for dt; hist: (n_bonds, N_HIST).
+        bprm: (n_models, N_BTABLE) model table with the Burgers coefficients for dt; m: the
+            bond's model (an index rather than the row bprm[m]: a view costs two atomic
+            reference-count updates per call); hist: (n_bonds, N_HIST).
         delta: r_i + r_j - d [m] (negative: a gap); n: unit normal from j to i.
         v: contact-point velocity of i relative to j [m/s]; w: omega_i - omega_j [rad/s].
         ri, rj: radii [m]; dt: time step [s].
@@ -217,7 +220,7 @@ def bond_law(p, hist, b, delta, nx, ny, nz, vx, vy, vz, wx, wy, wz, ri, rj, dt):
         without the branch torques), energy dissipated this step [J], INTACT or the mode in
         which the bond broke this step (then force and moment are zero).
     """
-    kind = p[B_KIND]
+    kind = bprm[m, B_KIND]
     vn = vx * nx + vy * ny + vz * nz
     vtx = vx - vn * nx
     vty = vy - vn * ny
@@ -229,35 +232,35 @@ def bond_law(p, hist, b, delta, nx, ny, nz, vx, vy, vz, wx, wy, wz, ri, rj, dt):
     e_diss = 0.0
     state = INTACT
     if kind == CONTACT_BOND:
-        fn = p[B_KN] * (delta - hist[b, H_D0])
-        sx -= p[B_KS] * vtx * dt
-        sy -= p[B_KS] * vty * dt
-        sz -= p[B_KS] * vtz * dt
-        if -fn >= p[B_SN]:
+        fn = bprm[m, B_KN] * (delta - hist[b, H_D0])
+        sx -= bprm[m, B_KS] * vtx * dt
+        sy -= bprm[m, B_KS] * vty * dt
+        sz -= bprm[m, B_KS] * vtz * dt
+        if -fn >= bprm[m, B_SN]:
             state = BROKEN_TENSION
-        elif sx * sx + sy * sy + sz * sz >= p[B_SS] * p[B_SS]:
+        elif sx * sx + sy * sy + sz * sz >= bprm[m, B_SS] * bprm[m, B_SS]:
             state = BROKEN_SHEAR
     elif kind == PARALLEL_BOND:
-        rb = p[B_LAMBDA] * min(ri, rj)
+        rb = bprm[m, B_LAMBDA] * min(ri, rj)
         area = math.pi * rb * rb
         inert = 0.25 * area * rb * rb
         polar = 2.0 * inert
-        fn = hist[b, H_FN] - p[B_PKN] * area * vn * dt
-        sx -= p[B_PKS] * area * vtx * dt
-        sy -= p[B_PKS] * area * vty * dt
-        sz -= p[B_PKS] * area * vtz * dt
+        fn = hist[b, H_FN] - bprm[m, B_PKN] * area * vn * dt
+        sx -= bprm[m, B_PKS] * area * vtx * dt
+        sy -= bprm[m, B_PKS] * area * vty * dt
+        sz -= bprm[m, B_PKS] * area * vtz * dt
         wn = wx * nx + wy * ny + wz * nz
-        mt = hist[b, H_MT] - p[B_PKS] * polar * wn * dt
+        mt = hist[b, H_MT] - bprm[m, B_PKS] * polar * wn * dt
         bx, by, bz = _rotate_vec(hist, b, H_MB, nx, ny, nz)
-        bx -= p[B_PKN] * inert * (wx - wn * nx) * dt
-        by -= p[B_PKN] * inert * (wy - wn * ny) * dt
-        bz -= p[B_PKN] * inert * (wz - wn * nz) * dt
+        bx -= bprm[m, B_PKN] * inert * (wx - wn * nx) * dt
+        by -= bprm[m, B_PKN] * inert * (wy - wn * ny) * dt
+        bz -= bprm[m, B_PKN] * inert * (wz - wn * nz) * dt
         mb = math.sqrt(bx * bx + by * by + bz * bz)
         sigma = -fn / area + mb * rb / inert
         tau = math.sqrt(sx * sx + sy * sy + sz * sz) / area + abs(mt) * rb / polar
-        if sigma >= p[B_SN]:
+        if sigma >= bprm[m, B_SN]:
             state = BROKEN_TENSION
-        elif tau >= p[B_SS]:
+        elif tau >= bprm[m, B_SS]:
             state = BROKEN_SHEAR
         hist[b, H_MT] = mt
         hist[b, H_MB] = bx
@@ -269,20 +272,20 @@ def bond_law(p, hist, b, delta, nx, ny, nz, vx, vy, vz, wx, wy, wz, ri, rj, dt):
     else:  # BURGERS
         sep = -delta if delta < 0.0 else 0.0
         if delta >= 0.0:  # compression: elastic; the tension element restarts unloaded
-            fn = p[B_KN] * delta
+            fn = bprm[m, B_KN] * delta
             # The element's energy is lost with it, less the work its force s_0 (from the step
             # before, gap g) did in this step, which closes the gap: the integrator's trapezoid
             # gives that force half the step's displacement g + delta. Without that term the
             # balance lost s_0 (g + delta) / 2 at every closing, first order in dt once the
             # dashpots have crept (s_0 of either sign, not small: -7.4e-3 of the energy over 37
             # closings at 0.05 x the critical step, against 5e-4 with it).
-            e_diss += (0.5 * hist[b, H_FN] ** 2 / p[B_KMN] + 0.5 * p[B_KKN] * hist[b, H_UKN] ** 2
+            e_diss += (0.5 * hist[b, H_FN] ** 2 / bprm[m, B_KMN] + 0.5 * bprm[m, B_KKN] * hist[b, H_UKN] ** 2
                        - 0.5 * hist[b, H_FN] * (hist[b, H_SEP] + delta))
             hist[b, H_FN] = 0.0
             hist[b, H_UKN] = 0.0
         else:
-            t1, uk1, ed = burgers_step(hist[b, H_FN], hist[b, H_UKN], sep - hist[b, H_SEP], dt, p, B_COEF_N,
-                                       p[B_KMN], p[B_KKN])
+            t1, uk1, ed = burgers_step(hist[b, H_FN], hist[b, H_UKN], sep - hist[b, H_SEP], dt, bprm, m, B_COEF_N,
+                                       bprm[m, B_KMN], bprm[m, B_KKN])
             hist[b, H_FN] = t1
             hist[b, H_UKN] = uk1
             e_diss += ed
@@ -290,9 +293,9 @@ def bond_law(p, hist, b, delta, nx, ny, nz, vx, vy, vz, wx, wy, wz, ri, rj, dt):
         hist[b, H_SEP] = sep
         # shear: the element's elongation is i's tangential displacement, its force -F_s
         kx, ky, kz = _rotate_vec(hist, b, H_UKS, nx, ny, nz)
-        ex, kx, ed0 = burgers_step(-sx, kx, vtx * dt, dt, p, B_COEF_S, p[B_KMS], p[B_KKS])
-        ey, ky, ed1 = burgers_step(-sy, ky, vty * dt, dt, p, B_COEF_S, p[B_KMS], p[B_KKS])
-        ez, kz, ed2 = burgers_step(-sz, kz, vtz * dt, dt, p, B_COEF_S, p[B_KMS], p[B_KKS])
+        ex, kx, ed0 = burgers_step(-sx, kx, vtx * dt, dt, bprm, m, B_COEF_S, bprm[m, B_KMS], bprm[m, B_KKS])
+        ey, ky, ed1 = burgers_step(-sy, ky, vty * dt, dt, bprm, m, B_COEF_S, bprm[m, B_KMS], bprm[m, B_KKS])
+        ez, kz, ed2 = burgers_step(-sz, kz, vtz * dt, dt, bprm, m, B_COEF_S, bprm[m, B_KMS], bprm[m, B_KKS])
         e_diss += ed0 + ed1 + ed2
         sx = -ex
         sy = -ey
@@ -300,9 +303,9 @@ def bond_law(p, hist, b, delta, nx, ny, nz, vx, vy, vz, wx, wy, wz, ri, rj, dt):
         hist[b, H_UKS] = kx
         hist[b, H_UKS + 1] = ky
         hist[b, H_UKS + 2] = kz
-        if -fn >= p[B_SN]:
+        if -fn >= bprm[m, B_SN]:
             state = BROKEN_TENSION
-        elif sx * sx + sy * sy + sz * sz >= p[B_SS] * p[B_SS]:
+        elif sx * sx + sy * sy + sz * sz >= bprm[m, B_SS] * bprm[m, B_SS]:
             state = BROKEN_SHEAR
     if kind != BURGERS:
         hist[b, H_FN] = fn
@@ -318,7 +321,7 @@ def bond_law(p, hist, b, delta, nx, ny, nz, vx, vy, vz, wx, wy, wz, ri, rj, dt):
         fx = fn * nx + sx
         fy = fn * ny + sy
         fz = fn * nz + sz
-        e_diss += bond_energy(p, hist, b, delta, ri, rj) + 0.5 * dt * (fx * vx + fy * vy + fz * vz
+        e_diss += bond_energy(bprm, m, hist, b, delta, ri, rj) + 0.5 * dt * (fx * vx + fy * vy + fz * vz
                                                                        + mx * wx + my * wy + mz * wz)
         d0 = hist[b, H_D0]
         for col in range(N_HIST):
@@ -381,7 +384,7 @@ def bond_pass(bstart, bj, bmodel, bstate, hist, bprm, xs, vs, ws, rad, smat, sma
             seated_force = False
             if state == INTACT:
                 fx, fy, fz, mx, my, mz, ed, state = bond_law(
-                    bprm[bmodel[b]], hist, b, delta, nx, ny, nz, vx, vy, vz, wx, wy, wz, ri, rj, dt)
+                    bprm, bmodel[b], hist, b, delta, nx, ny, nz, vx, vy, vz, wx, wy, wz, ri, rj, dt)
                 if state != INTACT:
                     bstate[b] = state
                     broke[0] = 1
@@ -399,12 +402,13 @@ def bond_pass(bstart, bj, bmodel, bstate, hist, bprm, xs, vs, ws, rad, smat, sma
                     mrs[b, col] = 0.0
                 fx = fy = fz = mx = my = mz = ed = 0.0
             if seated_force:
-                pm = prm[smat[i], smat[j]]
+                ma = smat[i]
+                mb = smat[j]
                 rstar = ri * rj / (ri + rj)
                 mi = smass[i]
                 mj = smass[j]
                 fx, fy, fz, mx, my, mz, ec, ef = contact_law(
-                    law, pm, delta - d0, nx, ny, nz, vx, vy, vz, wx, wy, wz, rstar, mi * mj / (mi + mj), dt,
+                    law, prm, ma, mb, delta - d0, nx, ny, nz, vx, vy, vz, wx, wy, wz, rstar, mi * mj / (mi + mj), dt,
                     fts, mrs, b, friction, rolling)
                 if took_over:
                     # its spring energy and the work of its force in the second half kick move
@@ -412,7 +416,7 @@ def bond_pass(bstart, bj, bmodel, bstate, hist, bprm, xs, vs, ws, rad, smat, sma
                     # step's dashpot and slip losses, so the step books the other half of each,
                     # the same half-step lead as the first step of any contact (it cancels when
                     # the contact ends)
-                    ed += 0.5 * ec - strain_energy(law, pm, delta - d0, rstar, fts, mrs, b, friction, rolling) \
+                    ed += 0.5 * ec - strain_energy(law, prm, ma, mb, delta - d0, rstar, fts, mrs, b, friction, rolling) \
                         - 0.5 * dt * (fx * vx + fy * vy + fz * vz + mx * wx + my * wy + mz * wz)
                     ef *= 0.5
                 else:
@@ -501,8 +505,8 @@ def bond_strain_energy(bstart, bj, bmodel, bstate, hist, bprm, xs, rad, smat, pr
             d = math.sqrt((xs[i, 0] - xs[j, 0]) ** 2 + (xs[i, 1] - xs[j, 1]) ** 2 + (xs[i, 2] - xs[j, 2]) ** 2)
             delta = rad[i] + rad[j] - d
             if bstate[b] == INTACT:
-                e += bond_energy(bprm[bmodel[b]], hist, b, delta, rad[i], rad[j])
+                e += bond_energy(bprm, bmodel[b], hist, b, delta, rad[i], rad[j])
             elif delta > d0:
-                e += strain_energy(law, prm[smat[i], smat[j]], delta - d0, rad[i] * rad[j] / (rad[i] + rad[j]),
+                e += strain_energy(law, prm, smat[i], smat[j], delta - d0, rad[i] * rad[j] / (rad[i] + rad[j]),
                                    fts, mrs, b, friction, rolling)
     return e

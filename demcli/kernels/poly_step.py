@@ -120,12 +120,13 @@ G_DEPTH, G_FN, G_KT = 0, 1, 2
 
 
 @njit(inline="always")
-def _volumetric_law(p, vol, depth, area, nx, ny, nz, vx, vy, vz, mstar, dt, ft, k, friction, dashpot):
+def _volumetric_law(prm, ma, mb, vol, depth, area, nx, ny, nz, vx, vy, vz, mstar, dt, ft, k, friction, dashpot):
     """Force on A of one contact (seed eqs. 17-19; see the module docstring).
 
     Args:
-        p: (N_QPARAMS,) material-pair row. vol [m^3], depth [m], area [m^2]: overlap
-        volume, depth V/A_c and contact area. n: unit normal from B into A. v: velocity
+        prm: (n_m, n_m, N_QPARAMS) material-pair table; ma, mb: the pair's materials (indices:
+        a row view costs two atomic reference-count updates per contact). vol [m^3],
+        depth [m], area [m^2]: overlap volume, depth V/A_c and contact area. n: unit normal from B into A. v: velocity
         of A's material point at the contact point relative to B's [m/s]. mstar [kg].
         dt: step [s] (0 for the priming evaluation: no history increment).
         ft: (n, 3) tangential springs [N], row k updated in place.
@@ -133,7 +134,7 @@ def _volumetric_law(p, vol, depth, area, nx, ny, nz, vx, vy, vz, mstar, dt, ft, 
     Returns:
         (fx, fy, fz, e_damp, e_fric, F_N elastic, K_n (+ c_n/dt for the servo), K_t).
     """
-    kn = p[Q_KN]
+    kn = prm[ma, mb, Q_KN]
     sq = math.sqrt(area)
     knc = kn * sq                      # contact normal stiffness k_n sqrt(A_c) [N/m]
     fel = kn * math.sqrt(vol * depth)  # eq. 17
@@ -142,7 +143,7 @@ def _volumetric_law(p, vol, depth, area, nx, ny, nz, vx, vy, vz, mstar, dt, ft, 
     e_damp = 0.0
     kserv = knc
     if dashpot:
-        cn = 2.0 * p[Q_ZETA] * math.sqrt(mstar * knc)
+        cn = 2.0 * prm[ma, mb, Q_ZETA] * math.sqrt(mstar * knc)
         fn = fel - cn * vn
         if fn < 0.0:
             fn = 0.0
@@ -162,7 +163,7 @@ def _volumetric_law(p, vol, depth, area, nx, ny, nz, vx, vy, vz, mstar, dt, ft, 
         hx -= kt * vtx * dt
         hy -= kt * vty * dt
         hz -= kt * vtz * dt
-        lim = p[Q_MU] * fn
+        lim = prm[ma, mb, Q_MU] * fn
         hm2 = hx * hx + hy * hy + hz * hz
         if hm2 > lim * lim:
             hm = math.sqrt(hm2)
@@ -378,7 +379,7 @@ def _pair_forces(start, pj, x, v, w, mass, rad, bmat, prm, sw, dt,
                 vz = (v[i, 2] + w[i, 0] * aiy - w[i, 1] * aix) - (v[j, 2] + w[j, 0] * ajy - w[j, 1] * ajx)
                 mj = mass[j]
                 fx, fy, fz, ed, ef, fel, _, kt = _volumetric_law(
-                    prm[bmat[i], bmat[j]], vol, depth, area, nx, ny, nz, vx, vy, vz, mi * mj / (mi + mj), dt,
+                    prm, bmat[i], bmat[j], vol, depth, area, nx, ny, nz, vx, vy, vz, mi * mj / (mi + mj), dt,
                     ft, c, friction, dashpot)
                 fc[c, 0] = fx
                 fc[c, 1] = fy
@@ -507,7 +508,7 @@ def _gather(frow, trow, erow, rstart, rlist, fc, tj, act, epair,
                 vy = v[b, 1] + w[b, 2] * ax - w[b, 0] * az - wv[wl, 1]
                 vz = v[b, 2] + w[b, 0] * ay - w[b, 1] * ax - wv[wl, 2]
                 cfx, cfy, cfz, ed, ef, fel, kserv, kt = _volumetric_law(
-                    prm[bmat[b], wmat[wl]], vol, depth, area, nx, ny, nz, vx, vy, vz, m, dt, wft, k, friction,
+                    prm, bmat[b], wmat[wl], vol, depth, area, nx, ny, nz, vx, vy, vz, m, dt, wft, k, friction,
                     dashpot)
                 wfc[k, 0] = cfx
                 wfc[k, 1] = cfy

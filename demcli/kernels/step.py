@@ -213,7 +213,7 @@ def _pair_forces(start, pj, xs, vs, ws, rad, smat, smass, prm, law, dt, ft, mr, 
             mi = smass[i]
             mj = smass[j]
             fx, fy, fz, mx, my, mz, ed, ef = contact_law(
-                law, prm[smat[i], smat[j]], delta, nx, ny, nz, vx, vy, vz,
+                law, prm, smat[i], smat[j], delta, nx, ny, nz, vx, vy, vz,
                 wx, wy, wz, ri * rj / rs, mi * mj / (mi + mj), dt,
                 ft, mr, c, friction, rolling)
             fc[c, 0] = fx
@@ -274,8 +274,9 @@ def _wall_contact(i, k, w, xs, vs, ws, rad, smat, smass, wkind, wpoint, wnormal,
     vx = vs[i, 0] - wv[w, 0] - a * (wiy * nz - wiz * ny)
     vy = vs[i, 1] - wv[w, 1] - a * (wiz * nx - wix * nz)
     vz = vs[i, 2] - wv[w, 2] - a * (wix * ny - wiy * nx)
-    p = prm[smat[i], wmat[w]]
-    fx, fy, fz, mx, my, mz, ed, ef = contact_law(law, p, delta, nx, ny, nz, vx, vy, vz,
+    ma = smat[i]
+    mb = wmat[w]
+    fx, fy, fz, mx, my, mz, ed, ef = contact_law(law, prm, ma, mb, delta, nx, ny, nz, vx, vy, vz,
                                                  wix, wiy, wiz, ri, smass[i], dt,
                                                  wft, wmr, k, friction, rolling)
     tx = -a * (ny * fz - nz * fy) + mx
@@ -285,11 +286,11 @@ def _wall_contact(i, k, w, xs, vs, ws, rad, smat, smass, wkind, wpoint, wnormal,
     # velocity changes the dashpot force at once), k_n + c_n / dt
     m = smass[i]
     if law == HERTZ:
-        kn = 2.0 * p[P_ESTAR] * math.sqrt(ri * delta)
-        cn = 2.0 * math.sqrt(5.0 / 6.0) * p[P_ZETA] * math.sqrt(kn * m)
+        kn = 2.0 * prm[ma, mb, P_ESTAR] * math.sqrt(ri * delta)
+        cn = 2.0 * math.sqrt(5.0 / 6.0) * prm[ma, mb, P_ZETA] * math.sqrt(kn * m)
     else:
-        kn = p[P_KN]
-        cn = p[P_CN] + 2.0 * p[P_ZETA] * math.sqrt(m * kn)
+        kn = prm[ma, mb, P_KN]
+        cn = prm[ma, mb, P_CN] + 2.0 * prm[ma, mb, P_ZETA] * math.sqrt(m * kn)
     if dt > 0.0:
         kn += cn / dt
     return fx, fy, fz, tx, ty, tz, ed, ef, kn, fx * nx + fy * ny + fz * nz
@@ -812,7 +813,7 @@ def total_strain_energy(pi, pj, xs, rad, smat, prm, law, ft, mr, friction, rolli
         d = math.sqrt((xs[i, 0] - xs[j, 0]) ** 2 + (xs[i, 1] - xs[j, 1]) ** 2 + (xs[i, 2] - xs[j, 2]) ** 2)
         delta = rad[i] + rad[j] - d
         if delta > 0.0:
-            e += strain_energy(law, prm[smat[i], smat[j]], delta, rad[i] * rad[j] / (rad[i] + rad[j]),
+            e += strain_energy(law, prm, smat[i], smat[j], delta, rad[i] * rad[j] / (rad[i] + rad[j]),
                                ft, mr, c, friction, rolling)
     for i in range(xs.shape[0]):
         for k in range(wstart[i], wstart[i + 1]):
@@ -822,5 +823,5 @@ def total_strain_energy(pi, pj, xs, rad, smat, prm, law, ft, mr, friction, rolli
                                        xs[i, 0], xs[i, 1], xs[i, 2])
             delta = rad[i] - s
             if delta > 0.0:
-                e += strain_energy(law, prm[smat[i], wmat[wl]], delta, rad[i], wft, wmr, k, friction, rolling)
+                e += strain_energy(law, prm, smat[i], wmat[wl], delta, rad[i], wft, wmr, k, friction, rolling)
     return e
