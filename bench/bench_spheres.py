@@ -6,7 +6,7 @@ ONE ``System.advance(STEPS)`` call timed with ``time.perf_counter``. Scene set-u
 warm-up are reported separately and are not in the rate.
 
 Usage:
-    python bench/bench_spheres.py N VARIANT STEPS THREADS [--skin S]
+    python bench/bench_spheres.py N VARIANT STEPS THREADS [--skin S] [--order ORDER]
 
     N        number of spheres (1000 and 10000 give the peers' exact lattices)
     VARIANT  drop | dense
@@ -14,6 +14,9 @@ Usage:
     THREADS  numba threads for the parallel kernels (demcli.jit.set_threads)
     --skin S Verlet skin as a fraction of the sphere radius (r = 1 mm, so 0.3 = 0.3 mm;
              the peers' DROP_SKIN is in metres: 0.3 here = DROP_SKIN=3e-4). Default 0.3.
+    --order  spheres in memory in the lattice's row order (default, as the peers store them),
+             shuffled, or shuffled then sorted by cell as a dynamic stage stores a fresh scene
+             (lattice | shuffle | cells): what memory locality is worth.
 
 Prints figures (contacts at the end, neighbour-list rebuilds, kinetic energy, ...); the LAST
 line is ``particle_steps_per_s=<number>`` (N * STEPS / loop seconds), as the peers print it.
@@ -44,6 +47,9 @@ def parse_args(argv=None):
     ap.add_argument("steps", type=int, help="steps in the timed window")
     ap.add_argument("threads", type=int, help="numba threads")
     ap.add_argument("--skin", type=float, default=0.3, help="Verlet skin / sphere radius (default 0.3)")
+    ap.add_argument("--order", choices=("lattice", "shuffle", "cells"), default="lattice",
+                    help="sphere order in memory: the lattice's rows (default), random, or random "
+                         "then sorted by cell as a dynamic stage stores a fresh scene")
     return ap.parse_args(argv)
 
 
@@ -64,7 +70,7 @@ def main(argv=None):
     warm_s = warm_up(a.variant, a.skin)
 
     t0 = time.perf_counter()
-    system = make_system(a.n, a.variant, skin=a.skin)
+    system = make_system(a.n, a.variant, skin=a.skin, order=a.order)
     setup_s = time.perf_counter() - t0
     rebuild0 = int(system.counters[C_REBUILD])
 

@@ -11,6 +11,7 @@ import numpy as np
 from demcli.engine.materials import ContactModel, Material
 from demcli.engine.plan import make_plan
 from demcli.engine.system import Dynamics, System, Walls
+from demcli.state.order import cell_order, mean_spacing
 
 D = 2.0e-3
 RHO = 2650.0
@@ -26,7 +27,11 @@ def lattice_dims(n):
     return nx, nx, int(math.ceil(n / (nx * nx)))
 
 
-def make_system(n, variant="dense", skin=0.3):
+def make_system(n, variant="dense", skin=0.3, order="lattice"):
+    """The scene as a System, its spheres stored in the lattice's row order (x fastest, z
+    slowest), in a random order (``order="shuffle"``, seeded), or shuffled and then put back in
+    cell order by :func:`demcli.state.order.cell_order` as a dynamic stage does (``"cells"``):
+    what memory locality is worth, and what the stage's reordering recovers."""
     nx, ny, nz = lattice_dims(n)
     s = SPACING[variant]
     jit = (s - D) / 4.0
@@ -37,6 +42,12 @@ def make_system(n, variant="dense", skin=0.3):
     pos[:, 1] = ((idx // nx) % ny + 0.5) * s + rng.uniform(-jit, jit, n)
     pos[:, 2] = (idx // (nx * ny) + 0.5) * s
     vel = rng.uniform(-0.1, 0.1, (n, 3))
+    if order != "lattice":
+        perm = np.random.RandomState(1).permutation(n)
+        pos, vel = pos[perm], vel[perm]
+    if order == "cells":
+        perm = cell_order(pos, mean_spacing(pos))
+        pos, vel = pos[perm], vel[perm]
     lx, ly, lz = nx * s, ny * s, 2.0 * nz * s
     m = RHO * math.pi / 6 * D ** 3
     zeta = -math.log(0.5) / math.sqrt(math.pi ** 2 + math.log(0.5) ** 2)

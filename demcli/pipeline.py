@@ -213,6 +213,7 @@ class Runner:
     def run(self, from_stage=None, only=None, force=False):
         from demcli.stages.base import STAGE_TYPES, load_stage_types
         from demcli.state import read_meta, read_state, require, set_rng, state_hash, write_state
+        from demcli.state.order import spatial_order
 
         load_stage_types()
         stages = self.case.stages
@@ -254,6 +255,10 @@ class Runner:
                         results.append(StageResult(cfg.name, out_path, True, 0.0))
                         state_in, in_path = None, out_path
                         continue
+                if st_type.orders_particles and state_in is not None:
+                    state_in, moved = spatial_order(state_in)
+                    if moved:
+                        self.log(f"[{cfg.name}] particles stored in cell order (neighbours close in memory)")
                 ctx = StageContext(self, k, cfg, chash, input_hash)
                 if state_in is not None and "spheres" in state_in.groups:
                     # spheres, or bodies when the particles are polyhedra (no spheres)

@@ -322,7 +322,8 @@ def _remove_round(carver, masses, target, tol):
 def run(ctx, cfg, state_in):
     from demcli.geometry.carving import make_lattice, normal_widths, members_by_label
     from demcli.state import RecordTable
-    from demcli.stages.asphalt_common import build_aggregate_bodies, cell_order, copy_group, write_asphalt_vtu
+    from demcli.stages.asphalt_common import build_aggregate_bodies, copy_group, write_asphalt_vtu
+    from demcli.state.order import cell_order
 
     t_start = time.perf_counter()
     seeds = state_in.groups["seeds"]

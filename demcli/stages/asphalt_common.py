@@ -89,14 +89,6 @@ def scalar_str(value):
     return v.decode() if isinstance(v, bytes) else str(v)
 
 
-def cell_order(points, cell):
-    """Indices sorting points by the cell of side ``cell`` they fall in (z slowest), stable."""
-    if len(points) == 0:
-        return np.zeros(0, np.int64)
-    c = np.floor((points - points.min(axis=0)) / cell).astype(np.int64)
-    return np.lexsort((c[:, 0], c[:, 1], c[:, 2]))
-
-
 def quat_matrix(q):
     """Rotation matrices (n, 3, 3) body -> world of unit quaternions (w, x, y, z)."""
     from scipy.spatial.transform import Rotation

@@ -351,7 +351,7 @@ def describe(cfg, case):
 
 
 register_stage(StageType(
-    "compact", FIELDS, run, check=_check, describe=describe,
+    "compact", FIELDS, run, check=_check, describe=describe, orders_particles=True,
     requires=("bodies/x", "spheres/radius", "aggregates/volume"),
     plan=dem.plan_summary,
     doc="box walls press the aggregates (servo stress or target porosity); porosity against time (seed 000)"))

@@ -23,6 +23,8 @@ class StageType:
         check: optional cross-field rule ``check(node, report)``.
         doc: one-line description.
         describe: optional ``describe(cfg, case) -> str`` summary for ``demcli check``.
+        orders_particles: the stage integrates motion: a fresh input scene (no contacts or
+            bonds yet) is re-stored in cell order first (:mod:`demcli.state.order`).
     """
 
     name: str
@@ -34,6 +36,7 @@ class StageType:
     check: object = None
     doc: str = ""
     describe: object = None
+    orders_particles: bool = False
 
 
 def register_stage(stage_type):

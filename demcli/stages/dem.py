@@ -889,4 +889,5 @@ def plan_summary(ctx_case, cfg, scene):
 
 register_stage(StageType(
     "dem", FIELDS, run, needs_input=True, requires=("bodies/x", "spheres/radius"), check=_check,
+    orders_particles=True,
     plan=plan_summary, doc="integrate the motion with the declared physics"))

@@ -87,15 +87,10 @@ def _lattice(lo, hi, radii, planar):
     return pos
 
 
-def cell_order(pos, cell):
-    """Indices sorting points by the cell they fall in (x fastest, z slowest), stable."""
-    c = np.floor((pos - pos.min(axis=0)) / cell).astype(np.int64)
-    return np.lexsort((c[:, 0], c[:, 1], c[:, 2]))
-
-
 def run(ctx, cfg, state_in):
     from demcli.engine.clumps import union_mass_properties
     from demcli.kernels.placement import place_random
+    from demcli.state.order import cell_order
 
     rng = ctx.rng
     planar = ctx.case.dimension == 2

@@ -140,7 +140,7 @@ def run_prepare(ctx, cfg, state_in):
     from demcli.engine.system import Dynamics, System
     from demcli.kernels import layout as K
     from demcli.kernels.placement import place_random
-    from demcli.stages.generate import cell_order
+    from demcli.state.order import cell_order
     from demcli.state import RecordTable
 
     c = cfg.cylinder
