@@ -233,6 +233,7 @@ class Runner:
                     in_path = out_path
                     state_in = None
                     continue
+                moved = False
                 if st_type.needs_input:
                     if k == 0:
                         raise InputError(f"{self.case_path}: stage {cfg.name} ({cfg.type}) needs an input state, "
@@ -243,6 +244,8 @@ class Runner:
                     if state_in is None:
                         state_in = read_state(in_path)
                     require(state_in, st_type.requires, consumer=f"stage {cfg.name}", source=in_path)
+                    if st_type.orders_particles:  # hashed after: a checkpoint or an output made
+                        state_in, moved = spatial_order(state_in)  # in another order never matches
                     input_hash = state_hash(state_in)
                 else:
                     input_hash = ""
@@ -255,10 +258,8 @@ class Runner:
                         results.append(StageResult(cfg.name, out_path, True, 0.0))
                         state_in, in_path = None, out_path
                         continue
-                if st_type.orders_particles and state_in is not None:
-                    state_in, moved = spatial_order(state_in)
-                    if moved:
-                        self.log(f"[{cfg.name}] particles stored in cell order (neighbours close in memory)")
+                if moved:
+                    self.log(f"[{cfg.name}] particles stored in cell order (neighbours close in memory)")
                 ctx = StageContext(self, k, cfg, chash, input_hash)
                 if state_in is not None and "spheres" in state_in.groups:
                     # spheres, or bodies when the particles are polyhedra (no spheres)

@@ -323,7 +323,7 @@ def run(ctx, cfg, state_in):
     from demcli.geometry.carving import make_lattice, normal_widths, members_by_label
     from demcli.state import RecordTable
     from demcli.stages.asphalt_common import build_aggregate_bodies, copy_group, write_asphalt_vtu
-    from demcli.state.order import cell_order
+    from demcli.state.order import spatial_permutation
 
     t_start = time.perf_counter()
     seeds = state_in.groups["seeds"]
@@ -393,7 +393,7 @@ def run(ctx, cfg, state_in):
     n_seed = len(carver.radius)
     com = np.stack([np.bincount(owner, pts_all[:, d], n_seed) for d in range(3)], axis=1)[act] \
         / np.maximum(carver.count[act], 1)[:, None]
-    order = act[cell_order(com, 2.0 * carver.radius.max())] if len(act) else act
+    order = act[spatial_permutation(com)]
     counts = carver.count[order]
     start = np.r_[0, np.cumsum(counts)].astype(np.int64)
     pts = np.concatenate([pts_all[start_all[k]:start_all[k + 1]] for k in order]) if len(order) else \

@@ -542,14 +542,11 @@ def _describe(kind):
 
 _REQ = ("bodies/x", "polyhedra/shape")
 register_stage(StageType("deposit", DEPOSIT, run_deposit, requires=_REQ, check=_check_deposit,
-                         orders_particles=True,
                          describe=_describe("deposit"),
                          doc="gravity deposition of a polyhedral bed until at rest; bulk density and porosity"))
 register_stage(StageType("vibrate", VIBRATE, run_vibrate, requires=_REQ, check=_check_cyclic,
-                         orders_particles=True,
                          describe=_describe("vibrate"),
                          doc="plate vibration compaction: density and void ratio per cycle (seed 002)"))
 register_stage(StageType("sleeper", SLEEPER, run_sleeper, requires=_REQ, check=_check_cyclic,
-                         orders_particles=True,
                          describe=_describe("sleeper"),
                          doc="sleeper on the compacted bed, shoulders filled, cyclic load: settlement per cycle"))

@@ -23,8 +23,10 @@ class StageType:
         check: optional cross-field rule ``check(node, report)``.
         doc: one-line description.
         describe: optional ``describe(cfg, case) -> str`` summary for ``demcli check``.
-        orders_particles: the stage integrates motion: a fresh input scene (no contacts or
-            bonds yet) is re-stored in cell order first (:mod:`demcli.state.order`).
+        orders_particles: the runner re-stores the input scene in spatial cell order before
+            the stage (and before hashing it) where :func:`demcli.state.order.spatial_order`
+            can: spheres, and no contacts, bonds, actors or checkpoint yet. Set by the stages
+            that integrate a sphere scene from its first step (dem, compact).
     """
 
     name: str

@@ -670,6 +670,9 @@ def integrate(ctx, cfg, state_in, hooks=None):
     ckpt = ctx.load_checkpoint()
     source = ckpt if ckpt is not None else state_in
     groups = source.groups
+    if ckpt is not None and "phases" in state_in.groups:
+        # input data the checkpoint does not repeat (bonds.from_phases reads its models there)
+        groups = {**groups, "phases": state_in.groups["phases"]}
     system, plan, dt, dt_crit = make_system(ctx, cfg, groups, time=float(source.meta.get("time", 0.0)) if ckpt
                                             else 0.0, step=int(source.meta.get("step", 0)) if ckpt else 0,
                                             resume=ckpt is not None)

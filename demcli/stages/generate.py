@@ -90,7 +90,7 @@ def _lattice(lo, hi, radii, planar):
 def run(ctx, cfg, state_in):
     from demcli.engine.clumps import union_mass_properties
     from demcli.kernels.placement import place_random
-    from demcli.state.order import cell_order
+    from demcli.state.order import spatial_permutation
 
     rng = ctx.rng
     planar = ctx.case.dimension == 2
@@ -123,9 +123,9 @@ def run(ctx, cfg, state_in):
         if placed < n:
             raise StageError(f"stage {ctx.name}: placed only {placed} of {n} particles without overlap; "
                              "enlarge the region or lower the count")
-    # particles are stored in cell order (cells of 2 r_max, z slowest): neighbours sit close in
-    # memory, which the contact loops rely on for cache locality
-    order = cell_order(pos, 2.0 * env.max())
+    # particles are stored in cell order (cells of the mean spacing, z slowest): neighbours sit
+    # close in memory, which the contact loops rely on for cache locality
+    order = spatial_permutation(pos)
     pos, radii, env = pos[order], radii[order], env[order]
     vel = rng.uniform(-cfg.velocity, cfg.velocity, (n, 3)) if cfg.velocity > 0 else np.zeros((n, 3))
     if planar:

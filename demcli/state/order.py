@@ -1,31 +1,38 @@
 """Particles stored in spatial (cell) order, so that neighbours sit near each other in memory.
 
 The contact kernels read the positions and velocities of both spheres of every listed pair;
-when the pair's spheres are far apart in the arrays, each contact costs a cache miss. The
-stages that place spheres (generate, carve, prepare) store them in cell order
-(:func:`cell_order`), but a scene built otherwise (clumps made from an assembled polyhedral
-bed, a state written by other software) may be in random order. On the dense 10 000-sphere
-scene (``python bench/bench_spheres.py 10000 dense 20000 T --order lattice|shuffle|cells``,
-2026-11-22, one quiet window) shuffled spheres run at 1.88e7 particle-steps/s against 2.61e7
-in lattice order on one thread, 2.51e7 against 4.33e7 on two; shuffled and then put in cell
-order, 2.57e7 and 4.09e7. So a dynamic stage re-stores a fresh scene of spheres in cell
-order of its bodies (cells of about one body) before it starts.
+when the pair's spheres are far apart in the arrays, each contact costs a cache miss. On the
+dense 10 000-sphere scene (``python bench/bench_spheres.py 10000 dense 20000 T --order
+lattice|shuffle|cells``, 2026-11-22, one quiet window) shuffled spheres run at 1.88e7
+particle-steps/s against 2.61e7 in lattice order on one thread, 2.51e7 against 4.33e7 on two;
+shuffled and then put in cell order, 2.57e7 and 4.09e7. So the stages that place spheres
+store them in cell order (generate and carve: :func:`spatial_permutation`; prepare, which
+creates and bonds its specimen in one stage: cells of one diameter), and a
+dynamic stage (``orders_particles`` in :class:`demcli.stages.base.StageType`) re-stores a fresh
+sphere scene in that order before it starts: a scene built otherwise (clumps made from an
+assembled polyhedral bed, a state written by other software) may be in random order.
 
 The permutation is generic over the state schema (:mod:`demcli.state.fields`): every
-registered field whose rows are bodies (``n_b``) or spheres (``n_s``) is permuted, and every
-integer field that indexes them (``index_of``) is renumbered. Body ids (``bodies/id``) travel
-with their bodies, so a body keeps its identity in records and snapshots. The order is a pure
-function of the positions: the same input gives the same order, whatever the thread count.
+registered field whose rows are bodies (``n_b``) or spheres (``n_s``) is permuted, every
+integer field that indexes them (``index_of``) is renumbered, and the rows of a group that
+point at bodies (``aggregates/body``) follow them. Body ids (``bodies/id``) travel with their
+bodies, so a body keeps its identity in records and snapshots. The order is a deterministic
+function of the input state (positions, and input order within a cell), whatever the thread
+count.
 
-Pair groups (contacts, bonds, polyhedron contacts) store each pair as i < j with history
-whose sign depends on that orientation; a scene that already holds some is left as it is
-(it came from an earlier dynamic stage, which ordered it when it was fresh). Scenes of
+A scene is left as it is when it holds oriented pairs (contacts, bonds, polyhedron contacts
+store i < j with history whose sign depends on that orientation), actors (they are the last
+bodies: :func:`demcli.engine.actors.remove_actors`), a checkpoint, or a field outside the
+schema. So a scene that gains particles after its first dynamic stage (the mastic balls
+appended to a compacted aggregate skeleton with its contacts) keeps its order. Scenes of
 polyhedra (no spheres) are left as they are too: their step is bound by the narrow phase's
 arithmetic, and a settled 4238-polyhedron bed ran as fast in assembly order as in cell order
 (1.13-1.17e5 against 1.08-1.14e5 body-steps/s, one thread, three alternated runs).
 
 Only the start of a stage reorders: bodies keep their rows while the stage runs, since its
-hooks and records refer to them by row (a plate, a loaded sleeper).
+hooks and records refer to them by row (a plate, a loaded sleeper). The pipeline hashes the
+input after reordering it, so a checkpoint or an output made from another order is not taken
+for this one.
 """
 
 from __future__ import annotations
@@ -36,8 +43,9 @@ from demcli.state import fields
 
 PAIR_GROUPS = ("contacts", "bonds", "body_contacts")
 """Groups of i < j pairs with oriented history: a scene holding any is not reordered."""
-KEEP_GROUPS = PAIR_GROUPS + ("checkpoint",)
-"""Groups whose presence leaves a scene as it is (a checkpoint's rows follow its run's order)."""
+KEEP_GROUPS = PAIR_GROUPS + ("actors", "checkpoint")
+"""Groups whose presence leaves a scene as it is (actors are the last bodies; a checkpoint's
+rows follow its run's order)."""
 
 
 def cell_order(points, cell):
@@ -53,6 +61,14 @@ def cell_order(points, cell):
         return np.zeros(0, np.int64)
     c = np.floor((points - points.min(axis=0)) / cell).astype(np.int64)
     return np.lexsort(tuple(c[:, a] for a in range(c.shape[1])))
+
+
+def spatial_permutation(points):
+    """The order in which placed particles are stored: :func:`cell_order` with cells of the
+    mean spacing (about one particle per cell)."""
+    if len(points) == 0:
+        return np.zeros(0, np.int64)
+    return cell_order(points, mean_spacing(points))
 
 
 def mean_spacing(points):
@@ -90,7 +106,7 @@ def spatial_order(state):
     if x is None or len(x) < 2 or len(state.get("spheres/radius", ())) == 0 or unsafe_reason(state) is not None:
         return state, False
     x = np.asarray(x)[:, :int(state.meta.get("dim", 3))]
-    pb = cell_order(x, mean_spacing(x))
+    pb = spatial_permutation(x)
     sb = state.get("spheres/body")
     ps = None
     if sb is not None:

@@ -137,3 +137,36 @@ def test_bonds_from_phases_without_a_phase_table_is_bad_input(tmp_path):
     # Then: exit 2 with the stage, the key and the reason, no traceback
     assert res.exit_code == 2, res.output
     assert "bonds.from_phases" in res.output and "phases" in res.output and "Traceback" not in res.output
+
+
+def test_a_bonded_stage_resumes_bit_identically(bonded_run, tmp_path, monkeypatch):
+    """Interrupted and resumed, the from_phases stage (its bond and contact models come from the
+    input's phase table, which its checkpoint does not hold) ends as the uninterrupted run."""
+    import shutil
+
+    from demcli.engine import system as system_mod
+    from demcli.errors import StageError
+
+    out = tmp_path / "run"
+    out.mkdir()
+    for f in bonded_run.glob("0[0-5]-*.h5"):
+        shutil.copy(f, out / f.name)
+    path = _bonded_case(tmp_path)
+    real = system_mod.System.advance
+    calls = {"n": 0}
+
+    def interrupted(self, n):
+        calls["n"] += 1
+        if calls["n"] == 3:  # x_0's loads, the first record's chunk, then Ctrl-C at step 100
+            raise KeyboardInterrupt
+        return real(self, n)
+
+    monkeypatch.setattr(system_mod.System, "advance", interrupted)
+    with pytest.raises(StageError, match="interrupted at step 100"):
+        run_case(path, out=out, quiet=True, from_stage="bonded")
+    monkeypatch.setattr(system_mod.System, "advance", real)
+    run_case(path, out=out, quiet=True, resume=True)
+    assert "resuming from checkpoint" in (out / "log.txt").read_text()
+    a, b = read_state(bonded_run / "06-bonded.h5"), read_state(out / "06-bonded.h5")
+    for key in ("bodies/x", "bodies/v", "bodies/omega", "bonds/state", "bonds/force_s", "contacts/ft"):
+        assert np.array_equal(np.asarray(a[key]), np.asarray(b[key])), key

@@ -82,7 +82,8 @@ def test_uniaxial_creep_holds_the_stress_and_creeps(uniaxial):
     assert np.allclose(ev, rec["volumetric_strain"], atol=1e-15)
     assert np.allclose(ed, rec["distortional_strain"], atol=1e-15)
     # and the summary's dilation gradient is the least-squares slope of e_v on e_d in the window
-    slope = dilation_gradient(rec["distortional_strain"], rec["volumetric_strain"], (0.01, 0.04))
+    slope = dilation_gradient(rec["distortional_strain"], rec["volumetric_strain"], (0.004, 0.04))  # the case's
+    assert math.isfinite(slope)  # the smoke reaches its window
     assert float(st["creep_result/dilation_gradient"]) == pytest.approx(slope, rel=1e-12)
     assert float(st["creep_result/sigma_1"]) == 400e3 and float(st["creep_result/sigma_3"]) == 0.0
     # and the bonds held (no strength given)

@@ -7,9 +7,10 @@ from demcli.engine.materials import ContactModel, Material
 from demcli.engine.plan import make_plan
 from demcli.engine.system import Dynamics, System, Walls
 from demcli.state.fields import example_state, register_all, validate
-from demcli.state.order import cell_order, mean_spacing, spatial_order
+from demcli.state.order import (body_rows_by_id, cell_order, mean_spacing, spatial_order, spatial_permutation,
+                                 sphere_rows_by_id)
 
-register_all()  # the actors' fields (registered by the ballast stages) are part of the scene below
+register_all()  # every stage's fields, as in a run
 
 
 def test_cell_order_sorts_cells_z_slowest_and_keeps_ties_in_order():
@@ -34,12 +35,6 @@ def test_mean_spacing_of_a_lattice_and_of_a_plane():
 def _clumped_state(n_b=40, seed=1):
     st = example_state(n_bodies=n_b, spheres_per_body=3, seed=seed, contacts=False)
     st.groups.pop("contacts", None)
-    st["actors/body"] = np.array([7, 31], np.int64)
-    st["actors/name"] = np.array(["plate", "sleeper"], dtype=object)
-    for name in ("load_mean", "load_amplitude"):
-        st[f"actors/{name}"] = np.array([[0.0, 0.0, -1.0], [0.0, 0.0, -2.0]])
-    for name in ("frequency", "phase", "start"):
-        st[f"actors/{name}"] = np.array([1.0, 2.0])
     return st
 
 
@@ -72,14 +67,7 @@ def test_spatial_order_permutes_every_body_and_sphere_field_and_renumbers_indice
             np.testing.assert_array_equal(after[i][k], before[i][k], err_msg=f"body id {i}, {k}")
     # spheres grouped by body, bodies ascending
     assert np.all(np.diff(out["spheres/body"]) >= 0)
-    # rows that point at bodies or spheres are renumbered, and follow their bodies
-    for name in ("plate", "sleeper"):
-        k_old = list(st["actors/name"]).index(name)
-        k_new = list(out["actors/name"]).index(name)
-        assert out["bodies/id"][out["actors/body"][k_new]] == st["bodies/id"][st["actors/body"][k_old]]
-        assert out["actors/load_mean"][k_new][2] == st["actors/load_mean"][k_old][2]
-    assert np.all(np.diff(out["actors/body"]) >= 0)
-
+    # rows that point at spheres are renumbered, and follow their spheres
     def wall_rows(s):
         sph = s["wall_contacts/sphere"]
         return sorted((int(s["bodies/id"][s["spheres/body"][i]]), int(w), tuple(s["spheres/offset"][i]))
@@ -98,6 +86,15 @@ def test_a_scene_with_oriented_pairs_is_left_as_it_is(group):
     st = _clumped_state()
     st[f"{group}/i"] = np.array([0], np.int64)
     st[f"{group}/j"] = np.array([5], np.int64)
+    out, moved = spatial_order(st)
+    assert out is st and not moved
+
+
+def test_a_scene_with_actors_is_left_as_it_is():
+    """Actors are the last bodies (remove_actors cuts the scene there)."""
+    st = _clumped_state()
+    st["actors/body"] = np.array([len(st["bodies/x"]) - 1], np.int64)
+    st["actors/name"] = np.array(["plate"], dtype=object)
     out, moved = spatial_order(st)
     assert out is st and not moved
 
@@ -154,3 +151,39 @@ def test_a_reordered_scene_moves_as_the_original_one():
     np.testing.assert_allclose(b.x[ib], a.x[ia], rtol=0, atol=1e-14)
     np.testing.assert_allclose(b.v[ib], a.v[ia], rtol=0, atol=1e-10)
     np.testing.assert_allclose(b.w[ib], a.w[ia], rtol=0, atol=1e-7)
+
+
+def test_a_dem_stage_stores_a_shuffled_input_in_cell_order_and_keeps_ids(tmp_path):
+    """generate -> dem on the bead smoke case, the generate state shuffled in between: the dem
+    stage logs the reordering, its output is in cell order with every body's id, radius and
+    material kept, and the beads settle as in the unshuffled run (same count, a close mean
+    height: another summation order, so another realisation of the same settling)."""
+    from pathlib import Path
+
+    from demcli import run_case
+    from demcli.state import read_state, write_state
+
+    case = Path(__file__).resolve().parents[2] / "cases" / "smoke" / "beads.yaml"
+    run_case(case, out=tmp_path / "ref", quiet=True, overrides=["stages.settle.time.steps=600"])
+    run_case(case, out=tmp_path / "mix", quiet=True, only="pour")
+    st = read_state(tmp_path / "mix" / "00-pour.h5")
+    x = st["bodies/x"]
+    assert np.array_equal(spatial_order(st)[0]["bodies/x"], x)  # generate stores cell order
+    perm = np.random.default_rng(0).permutation(len(x))
+    inv = np.argsort(perm)
+    for name in list(st.groups["bodies"]):
+        st[f"bodies/{name}"] = np.asarray(st[f"bodies/{name}"])[perm]
+    st["spheres/body"] = inv[np.asarray(st["spheres/body"])]
+    write_state(tmp_path / "mix" / "00-pour.h5", st)
+    run_case(case, out=tmp_path / "mix", quiet=True, from_stage="settle", overrides=["stages.settle.time.steps=600"])
+    assert "particles stored in cell order" in (tmp_path / "mix" / "log.txt").read_text()
+    out = read_state(tmp_path / "mix" / "01-settle.h5")
+    ref = read_state(tmp_path / "ref" / "01-settle.h5")
+    np.testing.assert_array_equal(out["bodies/id"], st["bodies/id"][spatial_permutation(st["bodies/x"])])
+    x0 = read_state(tmp_path / "ref" / "00-pour.h5")["bodies/x"]
+    assert np.array_equal(spatial_permutation(x0), np.arange(len(x0)))
+    ro, rr = sphere_rows_by_id(out), sphere_rows_by_id(ref)
+    for name in ("radius", "material"):
+        np.testing.assert_array_equal(out[f"spheres/{name}"][ro], ref[f"spheres/{name}"][rr])
+    np.testing.assert_array_equal(out["bodies/mass"][body_rows_by_id(out)], ref["bodies/mass"][body_rows_by_id(ref)])
+    assert abs(out["bodies/x"][:, 2].mean() - ref["bodies/x"][:, 2].mean()) < 0.05 * ref["bodies/x"][:, 2].mean()
