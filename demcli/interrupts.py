@@ -21,10 +21,12 @@ _SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
 
 @contextmanager
-def deferred():
+def deferred(keep=True):
     """Hold SIGINT and SIGTERM inside the block; yields ``poll()``, which runs the held ones.
 
-    Signals still held when the block ends normally run on leaving it; when it ends with an
+    Signals still held when the block ends normally run on leaving it (with ``keep=False``
+    they are dropped: a block that writes the checkpoint of a stage already stopping, which a
+    second Ctrl-C or a batch system's SIGTERM must not cut short); when it ends with an
     exception they are dropped (the exception already stops the stage). Outside the main
     thread (where Python cannot set handlers) nothing is held and ``poll`` does nothing.
     """
@@ -49,7 +51,8 @@ def deferred():
     finally:
         for sig, handler in saved.items():
             signal.signal(sig, handler)
-    poll()
+    if keep:
+        poll()
 
 
 _LLVMLITE = f"{os.sep}llvmlite{os.sep}"

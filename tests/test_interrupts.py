@@ -63,6 +63,52 @@ def test_an_exception_in_the_block_drops_held_signals(recording_handler):
     assert recording_handler == []
 
 
+def test_held_signals_can_be_dropped_on_leaving(recording_handler):
+    # Given a block that must not be cut short and whose caller is already stopping
+    with interrupts.deferred(keep=False):
+        os.kill(os.getpid(), signal.SIGTERM)
+    # Then the signal neither cut it short nor runs afterwards, and the handler is back
+    assert recording_handler == []
+    os.kill(os.getpid(), signal.SIGTERM)
+    assert recording_handler == [signal.SIGTERM]
+
+
+def test_a_second_ctrl_c_while_the_checkpoint_is_written_does_not_cut_it_short(tmp_path, monkeypatch):
+    """Ctrl-C stops a stage; a second one (or a batch system's SIGTERM) arriving while the
+    stage writes its checkpoint waits for the write: the checkpoint is whole and readable,
+    the stage reports its interruption, and it resumes."""
+    from pathlib import Path
+
+    from demcli import run_case
+    from demcli.engine.system import System
+    from demcli.errors import StageError
+    from demcli.pipeline import StageContext
+    from demcli.state import read_state
+
+    case = Path(__file__).resolve().parent.parent / "cases" / "smoke" / "beads.yaml"
+    real_advance, real_write = System.advance, StageContext.write_checkpoint
+
+    def advance(self, n):
+        if self.step >= 600:
+            raise KeyboardInterrupt
+        return real_advance(self, n)
+
+    def write(self, state):
+        os.kill(os.getpid(), signal.SIGINT)  # the second Ctrl-C, in the middle of the write
+        return real_write(self, state)
+
+    monkeypatch.setattr(System, "advance", advance)
+    monkeypatch.setattr(StageContext, "write_checkpoint", write)
+    with pytest.raises(StageError, match="interrupted at step 600"):
+        run_case(case, out=tmp_path, quiet=True)
+    assert read_state(tmp_path / "01-settle.ckpt.h5").meta["step"] == 600
+    assert not list(tmp_path.glob(".*.tmp-*"))  # no half-written file left
+    monkeypatch.setattr(System, "advance", real_advance)
+    monkeypatch.setattr(StageContext, "write_checkpoint", real_write)
+    run_case(case, out=tmp_path, quiet=True, resume=True)
+    assert (tmp_path / "01-settle.h5").exists()
+
+
 def _frame_in(filename):
     """A frame whose code comes from ``filename``."""
     ns = {}

@@ -6,6 +6,7 @@ closed by the code under test (--workers) or by the fixture that starts them (--
 
 import csv
 import os
+import time
 import subprocess
 import sys
 from pathlib import Path
@@ -290,4 +291,10 @@ runs:
     status = {r["run"]: r["status"] for r in _rows(out / "status.csv")}
     assert set(status) == {"beads/seed=1", "beads/seed=2"} and "ok" not in status.values(), status
     assert not [f for f in folders if (f / "01-settle.h5").exists()]
+    # (a run outlives its closed worker long enough to checkpoint: the sweep does not wait for
+    # it, so its log line may come a moment after the sweep has exited)
+    deadline = time.monotonic() + 60.0
+    while time.monotonic() < deadline and not all("interrupted at step" in (f / "log.txt").read_text()
+                                                  for f in folders):
+        time.sleep(0.1)
     assert all("interrupted at step" in (f / "log.txt").read_text() for f in folders)

@@ -829,8 +829,9 @@ def integrate(ctx, cfg, state_in, hooks=None):
                 progress.update(system.step)
                 poll()
     except KeyboardInterrupt:
-        system.restore(last_good)
-        path = checkpoint()  # rows end at the last good step, which was taken right after a record
+        with interrupts.deferred(keep=False):  # a second Ctrl-C or SIGTERM does not cut the write short
+            system.restore(last_good)
+            path = checkpoint()  # rows end at the last good step, which was taken right after a record
         progress.close()
         raise StageError(f"stage {ctx.name} interrupted at step {system.step}; continue with --resume",
                          state_file=path) from None
