@@ -10,6 +10,7 @@ import yaml
 from demcli import run_case
 from demcli.kernels.bonds import B_KIND, B_SN, B_SS, CONTACT_BOND, INTACT, PARALLEL_BOND
 from demcli.state import read_state
+from demcli.state.order import sphere_rows_by_id
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -106,12 +107,16 @@ def test_every_touching_pair_of_bonded_phases_is_bonded(bonded):
     i, j = pairs[:, 0], pairs[:, 1]
     d = np.linalg.norm(x[i] - x[j], axis=1)
     touch = (d < r[i] + r[j] + gap) & (body[i] != body[j]) & ~((mat[i] == 0) & (mat[j] == 0))
-    expect = set(map(tuple, np.sort(np.c_[i[touch], j[touch]], axis=1).tolist()))
+    # (the bonded stage may store a fresh scene in cell order: spheres are followed by body id)
+    to_after = np.empty(len(r), np.int64)
+    to_after[sphere_rows_by_id(before)] = sphere_rows_by_id(after)
+    expect = set(map(tuple, np.sort(np.c_[to_after[i[touch]], to_after[j[touch]]], axis=1).tolist()))
     got = set(zip(after["bonds/i"].tolist(), after["bonds/j"].tolist()))
     assert got == expect and len(got) > 100
     # and each bond's model is the one of its spheres' materials
     model = after["bonds/model"]
     kinds = after["bond_models/kind"]
+    mat = after["spheres/material"]
     for b, (a, c) in enumerate(zip(after["bonds/i"], after["bonds/j"])):
         want = "parallel_bond" if mat[a] == mat[c] == 1 else "contact_bond"
         assert kinds[model[b]] == want
