@@ -87,7 +87,8 @@ def unsafe_reason(state):
         if any(len(np.atleast_1d(a)) for a in arrays.values()):
             return f"it holds {g}"
     for g, arrays in state.groups.items():
-        if g.split("/", 1)[0] in fields.GROUPS and fields.GROUPS[g.split("/", 1)[0]].tables:
+        top = fields.GROUPS.get(g.split("/", 1)[0])
+        if top is not None and top.tables:
             continue
         for name in arrays:
             if f"{g}/{name}" not in fields.FIELDS:
@@ -108,27 +109,18 @@ def spatial_order(state):
         return state, False
     x = np.asarray(x)[:, :int(state.meta.get("dim", 3))]
     pb = spatial_permutation(x)
-    sb = state.get("spheres/body")
-    ps = None
-    if sb is not None:
-        inv_b = np.empty_like(pb)
-        inv_b[pb] = np.arange(len(pb))
-        ps = np.argsort(inv_b[np.asarray(sb, np.int64)], kind="stable")
-    if np.array_equal(pb, np.arange(len(pb))) and (ps is None or np.array_equal(ps, np.arange(len(ps)))):
+    ps = np.argsort(_inverse(pb)[np.asarray(state["spheres/body"], np.int64)], kind="stable")
+    if np.array_equal(pb, np.arange(len(pb))) and np.array_equal(ps, np.arange(len(ps))):
         return state, False
     perm = {"n_b": pb, "n_s": ps}
-    inv = {}
-    for k, p in perm.items():
-        if p is not None:
-            inv[k] = np.empty_like(p)
-            inv[k][p] = np.arange(len(p))
+    inv = {k: _inverse(p) for k, p in perm.items()}
     out = fields.State(meta=dict(state.meta), groups={}, group_attrs=dict(state.group_attrs))
     for g, arrays in state.groups.items():
         new = {}
-        owner = None  # a row dim whose rows point at bodies or spheres (aggregates/body, actors/body)
+        owner = None  # a row dim whose rows point at bodies or spheres (aggregates/body, wall_contacts/sphere)
         for name, a in arrays.items():
             spec = fields.FIELDS.get(f"{g}/{name}")
-            if spec is not None and not spec.attr and spec.dims and perm.get(spec.dims[0]) is not None:
+            if spec is not None and not spec.attr and spec.dims and spec.dims[0] in perm:
                 a = np.asarray(a)[perm[spec.dims[0]]]
             if spec is not None and spec.index_of in inv and len(np.atleast_1d(a)):
                 a = np.asarray(a)
@@ -155,6 +147,12 @@ def body_rows_by_id(state):
 
 def sphere_rows_by_id(state):
     """Sphere rows grouped by body in ascending body id, each body's members in stored order."""
-    rank = np.empty(len(state["bodies/id"]), np.int64)
-    rank[body_rows_by_id(state)] = np.arange(len(rank))
+    rank = _inverse(body_rows_by_id(state))
     return np.argsort(rank[np.asarray(state["spheres/body"], np.int64)], kind="stable")
+
+
+def _inverse(p):
+    """The inverse of a permutation: inv[p[k]] = k."""
+    inv = np.empty_like(p)
+    inv[p] = np.arange(len(p))
+    return inv
