@@ -1,4 +1,4 @@
-"""Throughput of a settled polyhedral bed, with and without the cached separating faces.
+"""Throughput of a settled polyhedral bed, with and without the cached separating faces and directions.
 
 Usage: python bench/bench_poly_bed.py CASE STATE [STEPS]
   e.g. python bench/bench_poly_bed.py cases/ballast_wide.yaml runs/ballast_wide/03-deposit.h5 30
@@ -24,7 +24,7 @@ def main(argv=None):
     case_path, state_path = argv[0], argv[1]
     n = int(argv[2]) if len(argv) > 2 else 30
     from demcli.config.case import load_case
-    from demcli.kernels.poly_step import P_SEP, SEP_NONE
+    from demcli.kernels.poly_step import P_SEP, SEP_DIR, SEP_NONE
     from demcli.stages import dem
     from demcli.stages.base import load_stage_types
     from demcli.state import read_state
@@ -57,8 +57,9 @@ def main(argv=None):
     sep = a.nl[P_SEP]
     print(f"{nb} bodies, {len(sep)} listed pairs: cached {nb * 3 * n / ta:.3g} body-steps/s, "
           f"uncached {nb * 3 * n / tb:.3g}, speed-up {tb / ta:.2f}; bit-identical: {np.array_equal(a.x, b.x)}")
-    print(f"cached faces {np.count_nonzero((sep != 0) & (sep != SEP_NONE))}, edge-edge separated "
-          f"{np.count_nonzero(sep == SEP_NONE)}")
+    faces = np.count_nonzero((sep != 0) & (sep != SEP_NONE) & (sep != SEP_DIR))
+    print(f"cached faces {faces}, cached directions (edge-edge) {np.count_nonzero(sep == SEP_DIR)}, "
+          f"none found {np.count_nonzero(sep == SEP_NONE)}")
 
 
 if __name__ == "__main__":

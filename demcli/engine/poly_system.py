@@ -342,7 +342,8 @@ class PolySystem(BodySystem):
         return (start, ci, cj, np.zeros(nb + 1, np.int64), _EMPTY_I, ft, np.zeros((npair, 3)),
                 np.zeros((npair, 3)), np.zeros(npair, np.uint8), _empty2(2), np.zeros((npair, 3)),
                 wstart, wb, ww, wft, np.zeros((nq, 4)), np.zeros((nq, 3)),
-                self.x.copy(), np.zeros((len(self.walls), 3)), np.zeros(npair, np.int32))
+                self.x.copy(), np.zeros((len(self.walls), 3)), np.zeros(npair, np.int32),
+                np.zeros((npair, 3)))
 
     def _stored_history(self, group, key_a, key_b, n):
         a = np.asarray(group.get(key_a, _EMPTY_I), np.int64)

@@ -13,8 +13,9 @@ advances a chunk of steps without returning to Python. Each step:
    list when needed, tangential history carried over (``carry_history``);
 4. world vertices and face planes of every body (prange);
 5. the pair pass: prange over CSR rows i, the exact overlap (``overlap``) of each
-   listed pair whose bounding spheres meet, one force per pair into its own row; the
-   row owner sums i's side (race-free, as ``_pair_forces`` in step.py);
+   listed pair whose bounding spheres meet, unless a cached separating face or direction
+   (``sep``, ``sdir``) still clears it by a margin, one force per pair into its own row;
+   the row owner sums i's side (race-free, as ``_pair_forces`` in step.py);
 6. the gather per body: own row sums, the j sides through the reverse list, the
    plane-wall contacts (``plane_overlap`` against the solid half-space
    n_in . x <= n_in . p), body loads (gravity, local damping, viscous damping), and
@@ -74,6 +75,7 @@ from demcli.kernels.layout import (BAD_ENERGY, BAD_NUMBER, BAD_OVERLAP, C_BODY, 
 from demcli.kernels.neighbors import build_pairs, build_reverse, build_wall_pairs, carry_history
 from demcli.kernels.polyhedra import (contact_frame, max_row, overlap_ws, plane_overlap, scratch,
                                       to_world_planes, to_world_vertices)
+from demcli.kernels.separation import gap, separating_direction
 from demcli.kernels.step import _body_loads, _drift, _omega_from_L, _rotate_rigid, _wall_control, move_walls
 
 # columns of the material-pair table prm[a, b, :]
@@ -107,12 +109,16 @@ N_LOAD = 9
 
 # positions in the neighbour-state tuple ``nl`` of :func:`run_poly_steps`
 PNL_FIELDS = ("start", "pi", "pj", "rstart", "rlist", "ft", "fc", "tj", "act", "epair", "geo",
-              "wstart", "wbody", "wwall", "wft", "wfc", "wgeo", "xref", "wref", "sep")
+              "wstart", "wbody", "wwall", "wft", "wfc", "wgeo", "xref", "wref", "sep", "sdir")
 (P_START, P_PI, P_PJ, P_RSTART, P_RLIST, P_FT, P_FC, P_TJ, P_ACT, P_EPAIR, P_GEO,
- P_WSTART, P_WBODY, P_WWALL, P_WFT, P_WFC, P_WGEO, P_XREF, P_WREF, P_SEP) = range(len(PNL_FIELDS))
-# sep[c] (int32), a cached separating face of pair c: 0 unknown, k + 1 face k of body i,
-# -(k + 1) face k of body j, SEP_NONE no face separates (edge-edge: overlap() every step)
+ P_WSTART, P_WBODY, P_WWALL, P_WFT, P_WFC, P_WGEO, P_XREF, P_WREF, P_SEP, P_SDIR) = range(len(PNL_FIELDS))
+# sep[c] (int32), why pair c does not touch: 0 unknown (or touching), k + 1 face k of body i,
+# -(k + 1) face k of body j (its plane clears the other body), SEP_DIR the unit direction
+# sdir[c] (float64 (3,), from i to j) separates them (demcli.kernels.separation; pairs
+# separated only across two edges), SEP_NONE none found (overlap() every step)
 SEP_NONE = -(2 ** 30)
+SEP_DIR = SEP_NONE + 1
+SEP_ITER = 32  # GJK iterations allowed when searching a separating direction
 SEP_MARGIN = 1e-9  # a cached face must clear the other body by this x (r_i + r_j) + 1e-12 max |x|
 # columns of geo / wgeo (per contact, last evaluation): depth d [m], elastic normal force F_N [N],
 # tangential stiffness K_t [N/m]
@@ -274,13 +280,14 @@ def _still_separated(code, na, da, va, nb_, db_, vb, margin):
 @njit(parallel=True)
 def _pair_forces(start, pj, x, v, w, mass, rad, bmat, prm, sw, dt,
                  shape, vertex_start, face_start, fvstart, fverts, bvstart, bfstart, wvert, wnorm, woff,
-                 ft, fc, tj, act, epair, geo, frow, trow, erow, sep):
+                 ft, fc, tj, act, epair, geo, frow, trow, erow, sep, sdir):
     """Force of every listed pair into its own row; the row owner i sums its side.
 
     fc[c]: force on i [N]; tj[c]: torque on j [N m]; geo[c]: (depth, F_N, K_t);
     epair[c]: (dashpot, slip) losses this step [J]; frow/trow/erow[i]: i's sums.
-    sep[c]: the cached separating face (P_SEP): a pair still cleared by it skips the
-    exact overlap, which would find V = 0 (the results do not depend on the cache).
+    sep[c], sdir[c]: the cached separating face or direction (P_SEP): a pair still cleared by
+    it skips the exact overlap, which would find V = 0 (the results do not depend on the
+    cache). A direction that no longer clears is searched again from where it was.
     """
     friction = sw[S_FRICTION]
     energy = sw[S_ENERGY]
@@ -332,8 +339,19 @@ def _pair_forces(start, pj, x, v, w, mass, rad, bmat, prm, sw, dt,
                     code = sep[c]
                     margin = SEP_MARGIN * rs + 1e-12 * max(abs(xi0), abs(xi1), abs(xi2), abs(xj0), abs(xj1),
                                                           abs(xj2))
-                    if code != 0 and code != SEP_NONE and _still_separated(code, na, da, va, nb_, db_, vb,
-                                                                           margin):
+                    if code == SEP_DIR:
+                        apart = gap(sdir[c, 0], sdir[c, 1], sdir[c, 2], va, vb) > margin
+                        if not apart:
+                            apart, ux, uy, uz = separating_direction(va, vb, sdir[c, 0], sdir[c, 1], sdir[c, 2],
+                                                                     margin, SEP_ITER)
+                            if apart:
+                                sdir[c, 0] = ux
+                                sdir[c, 1] = uy
+                                sdir[c, 2] = uz
+                    else:
+                        apart = code != 0 and code != SEP_NONE and _still_separated(code, na, da, va, nb_, db_, vb,
+                                                                                    margin)
+                    if apart:
                         vol = 0.0
                     else:
                         vol, gx, gy, gz, sx, sy, sz = overlap_ws(
@@ -348,7 +366,14 @@ def _pair_forces(start, pj, x, v, w, mass, rad, bmat, prm, sw, dt,
                             elif gb > margin:
                                 sep[c] = -(fb + 1)
                             else:
-                                sep[c] = SEP_NONE
+                                found, ux, uy, uz = separating_direction(va, vb, -dx, -dy, -dz, margin, SEP_ITER)
+                                if found:
+                                    sep[c] = SEP_DIR
+                                    sdir[c, 0] = ux
+                                    sdir[c, 1] = uy
+                                    sdir[c, 2] = uz
+                                else:
+                                    sep[c] = SEP_NONE
                         elif vol > 0.0:
                             sep[c] = 0
                 if not vol > 0.0:
@@ -750,7 +775,7 @@ def run_poly_steps(nsteps, time, dt, sw, prm, gravity, local, visc, adamp,
     vertex_start, vertices, face_start, fvstart, fverts, face_normal, face_offset = shapes
     wvert, wnorm, woff = world
     (start, pi, pj, rstart, rlist, ft, fc, tj, act, epair, geo,
-     wstart, wbody, wwall, wft, wfc, wgeo, xref, wref, sep) = nl
+     wstart, wbody, wwall, wft, wfc, wgeo, xref, wref, sep, sdir) = nl
     friction = sw[S_FRICTION]
     energy = sw[S_ENERGY]
     adaptive = sw[S_ADAPTIVE]
@@ -797,6 +822,7 @@ def run_poly_steps(nsteps, time, dt, sw, prm, gravity, local, visc, adamp,
             epair = np.zeros((npair if energy else 0, 2))
             geo = np.zeros((npair, 3))
             sep = np.zeros(npair, np.int32)
+            sdir = np.zeros((npair, 3))
             if nw > 0:
                 nws, nwb, nww = build_wall_pairs(x, rad, skin, wkind, wpoint, wnormal, wradius)
                 nq = nww.shape[0]
@@ -812,7 +838,7 @@ def run_poly_steps(nsteps, time, dt, sw, prm, gravity, local, visc, adamp,
                         bvstart, bfstart, wvert, wnorm, woff)
         _pair_forces(start, pj, x, v, w, mass, rad, bmat, prm, sw, h,
                      shape, vertex_start, face_start, fvstart, fverts, bvstart, bfstart, wvert, wnorm, woff,
-                     ft, fc, tj, act, epair, geo, frow, trow, erow, sep)
+                     ft, fc, tj, act, epair, geo, frow, trow, erow, sep, sdir)
         counters[C_PAIRS] += 1
         if friction:
             counters[C_FRICTION] += 1
@@ -852,7 +878,7 @@ def run_poly_steps(nsteps, time, dt, sw, prm, gravity, local, visc, adamp,
             if status != OK:
                 break
     nl = (start, pi, pj, rstart, rlist, ft, fc, tj, act, epair, geo,
-          wstart, wbody, wwall, wft, wfc, wgeo, xref, wref, sep)
+          wstart, wbody, wwall, wft, wfc, wgeo, xref, wref, sep, sdir)
     return status, n, time, nl
 
 
