@@ -119,7 +119,7 @@ PNL_FIELDS = ("start", "pi", "pj", "rstart", "rlist", "ft", "fc", "tj", "act", "
 SEP_NONE = -(2 ** 30)
 SEP_DIR = SEP_NONE + 1
 SEP_ITER = 32  # GJK iterations allowed when searching a separating direction
-SEP_MARGIN = 1e-9  # a cached face must clear the other body by this x (r_i + r_j) + 1e-12 max |x|
+SEP_MARGIN = 1e-9  # a cached face or direction must clear by this x (r_i + r_j) + 1e-12 max |x|
 # columns of geo / wgeo (per contact, last evaluation): depth d [m], elastic normal force F_N [N],
 # tangential stiffness K_t [N/m]
 G_DEPTH, G_FN, G_KT = 0, 1, 2
@@ -343,7 +343,7 @@ def _pair_forces(start, pj, x, v, w, mass, rad, bmat, prm, sw, dt,
                         apart = gap(sdir[c, 0], sdir[c, 1], sdir[c, 2], va, vb) > margin
                         if not apart:
                             apart, ux, uy, uz = separating_direction(va, vb, sdir[c, 0], sdir[c, 1], sdir[c, 2],
-                                                                     margin, SEP_ITER)
+                                                                     margin, SEP_ITER, buf)
                             if apart:
                                 sdir[c, 0] = ux
                                 sdir[c, 1] = uy
@@ -366,7 +366,8 @@ def _pair_forces(start, pj, x, v, w, mass, rad, bmat, prm, sw, dt,
                             elif gb > margin:
                                 sep[c] = -(fb + 1)
                             else:
-                                found, ux, uy, uz = separating_direction(va, vb, -dx, -dy, -dz, margin, SEP_ITER)
+                                found, ux, uy, uz = separating_direction(va, vb, -dx, -dy, -dz, margin, SEP_ITER,
+                                                                         buf)
                                 if found:
                                     sep[c] = SEP_DIR
                                     sdir[c, 0] = ux

@@ -7,7 +7,8 @@ pair does not touch: a unit direction u with
 
 so that B lies beyond A along u by more than ``margin`` [m] and the exact overlap of the two
 bodies is empty. Checking a remembered u costs one pass over both vertex sets; the exact
-overlap (:func:`demcli.kernels.polyhedra.overlap_ws`) costs ~20 times more. Face normals
+overlap (:func:`demcli.kernels.polyhedra.overlap_ws`) of such a pair costs ~2 us (bench/README.md,
+"Polyhedron narrow phase"). Face normals
 separate most such pairs (the ``P_SEP`` face cache); this covers the rest, pairs separated
 only across two edges.
 
@@ -16,21 +17,20 @@ Search (:func:`separating_direction`): the GJK distance iteration (Gilbert, John
 space", IEEE J. Robot. Autom. 4(2)) on the Minkowski difference D = B - A = {b - a}. A simplex W
 of up to four support points of D is reduced each iteration to the face, edge or vertex that
 holds its point v closest to the origin (closest point of a triangle to a point: Ericson 2005,
-"Real-Time Collision Detection", sec. 5.1.5); the next support point s minimises v . x over D
+"Real-Time Collision Detection", sec. 5.1.5; of a tetrahedron: sec. 5.1.6); the next support point s minimises v . x over D
 (s = argmin_b v . b - argmax_a v . a). It stops with
 
 * success when gap(v / |v|) > margin: u . s = min over D of u . x, the test the cache repeats;
 * failure when v no longer moves toward the origin (|v|^2 - v . s <= 1e-12 |v|^2: v is the
-  closest point of D, so the distance is at most margin), when the origin lies in the simplex
-  (the sets touch or overlap) or after ``max_iter`` iterations.
+  closest point of D, so the distance is at most margin (1 + 1e-12) up to round-off), when the
+  origin lies in the simplex or on its boundary (the sets touch or overlap), when v is not
+  finite (degenerate simplices) or after ``max_iter`` iterations.
 
 A failure only means that no direction was found; callers then use the exact overlap, so the
 search cannot change a result, only skip work that would find V = 0.
 """
 
 import math
-
-import numpy as np
 
 from demcli.jit import njit
 
@@ -126,7 +126,7 @@ def _outside(w, ia, ib, ic, idd):
 def _closest(w, n):
     """Closest point of the simplex w[0:n] (n = 1..4) to the origin; w is reduced in place to
     the sub-simplex that holds it. Returns (x, y, z, n_kept); n_kept = 0 when the origin lies
-    inside the tetrahedron (or on a degenerate one)."""
+    inside the tetrahedron or on its boundary, or the tetrahedron is flat."""
     if n == 1:
         return w[0, 0], w[0, 1], w[0, 2], 1
     if n == 2:
@@ -159,7 +159,7 @@ def _closest(w, n):
 
 
 @njit
-def separating_direction(va, vb, dx, dy, dz, margin, max_iter):
+def separating_direction(va, vb, dx, dy, dz, margin, max_iter, w):
     """A unit direction u with gap(u) > margin (B beyond A along u), searched by GJK.
 
     Args:
@@ -168,16 +168,18 @@ def separating_direction(va, vb, dx, dy, dz, margin, max_iter):
             separated the pair before).
         margin: the gap required [m]. max_iter: iteration limit (a few suffice when the
             gap is not tiny; 32 in the pair pass).
+        w: (>= 4, 3) float64 scratch for the simplex (rows 0-3 are overwritten).
 
     Returns:
-        (found, ux, uy, uz): found is True when gap(u) > margin, as :func:`gap` computes it.
+        (found, ux, uy, uz): found is True when gap(u) > margin, as :func:`gap` computes it
+        (never from a non-finite direction or a vertex set of NaNs; a single NaN vertex is
+        skipped by the comparisons, which matters only in a run the NaN guard stops anyway).
     """
-    w = np.empty((4, 3))
     n = 0
     vx, vy, vz = dx, dy, dz
     for _ in range(max_iter):
         vv = vx * vx + vy * vy + vz * vz
-        if not vv > 0.0:
+        if not (0.0 < vv < math.inf):
             break
         nv = math.sqrt(vv)
         ux, uy, uz = vx / nv, vy / nv, vz / nv
@@ -196,7 +198,7 @@ def separating_direction(va, vb, dx, dy, dz, margin, max_iter):
             if t < bmin:
                 bmin = t
                 ib = k
-        if bmin - amax > margin:
+        if bmin - amax > margin and amax > -math.inf and bmin < math.inf:  # not from NaN projections
             return True, ux, uy, uz
         sx, sy, sz = vb[ib, 0] - va[ia, 0], vb[ib, 1] - va[ia, 1], vb[ib, 2] - va[ia, 2]
         if n > 0 and vv - (vx * sx + vy * sy + vz * sz) <= 1e-12 * vv:

@@ -1,10 +1,9 @@
 """Separating directions between convex vertex sets (demcli.kernels.separation) against slow
-references: the closest point of a simplex as a quadratic program over convex weights (scipy
-SLSQP), and the distance of two convex hulls from Qhull's hull of their Minkowski difference."""
+references: the closest point of a simplex by brute force over its faces, edges and vertices,
+and the distance of two convex hulls from Qhull's hull of their Minkowski difference."""
 
 import numpy as np
 import pytest
-from scipy.optimize import minimize
 from scipy.spatial import ConvexHull
 
 from demcli.geometry import convex_hull, random_polyhedron
@@ -13,13 +12,18 @@ from demcli.kernels.separation import _closest, gap, separating_direction
 
 
 def min_norm_point(points):
-    """The point of the convex hull of ``points`` (k, 3) nearest the origin (SLSQP on convex weights)."""
-    k = len(points)
-    res = minimize(lambda lam: float(np.sum((lam @ points) ** 2)), np.full(k, 1.0 / k),
-                   jac=lambda lam: 2.0 * points @ (lam @ points), method="SLSQP", bounds=[(0.0, 1.0)] * k,
-                   constraints=[{"type": "eq", "fun": lambda lam: lam.sum() - 1.0, "jac": lambda lam: np.ones(k)}],
-                   options={"ftol": 1e-15, "maxiter": 500})
-    return res.x @ points
+    """The point of the convex hull of ``points`` (k <= 4, 3) nearest the origin, by brute force:
+    the origin's projection onto the affine hull of every subset, kept where its barycentric
+    weights are all >= 0, the nearest of those."""
+    best = None
+    for mask in range(1, 2 ** len(points)):
+        sub = points[[i for i in range(len(points)) if mask >> i & 1]]
+        e = (sub[1:] - sub[0]).T
+        mu = np.linalg.lstsq(e, -sub[0], rcond=1e-12)[0] if len(sub) > 1 else np.zeros(0)
+        x = sub[0] + e @ mu
+        if np.all(mu >= -1e-12) and mu.sum() <= 1 + 1e-12 and (best is None or x @ x < best @ best):
+            best = x
+    return best
 
 
 def _segment_point(p, q):
@@ -89,33 +93,33 @@ def test_closest_point_of_a_simplex_matches_the_quadratic_program(n):
         x, y, z, kept = _closest(buf, n)
         if kept == 0:
             # Then "origin inside" only for a tetrahedron that holds it (reference distance ~0)
-            assert n == 4 and np.linalg.norm(ref) < 1e-6
+            assert n == 4 and np.linalg.norm(ref) < 1e-9
             inside += 1
             continue
-        # Then the point is the reference min-norm point to 1e-6 (SLSQP's accuracy), it is at
-        # least as near the origin, and the kept rows are points of the simplex whose hull holds it
-        assert np.linalg.norm([x, y, z] - ref) < 1e-6 * max(1.0, np.linalg.norm(ref))
-        assert np.linalg.norm([x, y, z]) <= np.linalg.norm(ref) + 1e-9
+        # Then the point is the reference point to 1e-9, and the kept rows are points of the
+        # simplex whose hull holds it
+        assert np.linalg.norm([x, y, z] - ref) < 1e-9 * max(1.0, np.linalg.norm(ref))
         kept_rows = buf[:kept]
         assert all(np.min(np.linalg.norm(w - r, axis=1)) == 0.0 for r in kept_rows)
-        assert np.linalg.norm(min_norm_point(kept_rows) - [x, y, z]) < 1e-6 * max(1.0, np.linalg.norm(ref))
+        assert np.linalg.norm(min_norm_point(kept_rows) - [x, y, z]) < 1e-9 * max(1.0, np.linalg.norm(ref))
     if n == 4:
         assert inside > 0  # the enclosing case was exercised
 
 
 def test_separated_pairs_get_a_direction_that_clears_them():
     # Given 60 random pairs of convex polyhedra (size ~1) pulled apart along a random direction u
-    # until their gap along u is 1e-6 .. 0.3 (their hull distance is at least that)
+    # until their gap along u is 1e-8 .. 0.3 (their hull distance is at least that; the engine's
+    # margin is 1e-9 of the bodies' size)
     rng = np.random.default_rng(5)
     for _ in range(60):
         a, b0, u = random_pair(rng)
-        target = 10.0 ** rng.uniform(-6, np.log10(0.3))
+        target = 10.0 ** rng.uniform(-8, np.log10(0.3))
         vb = b0.vertices + first_shift(lambda t: gap(*u, a.vertices, b0.vertices + t * u) <= target) * u
         dist = hull_distance(a.vertices, vb)
         margin = 1e-9
         # When GJK searches from the centre line
         d = vb.mean(axis=0) - a.vertices.mean(axis=0)
-        found, ux, uy, uz = separating_direction(a.vertices, vb, *d, margin, 32)
+        found, ux, uy, uz = separating_direction(a.vertices, vb, *d, margin, 32, np.empty((4, 3)))
         # Then it finds a unit direction whose gap, recomputed here, exceeds the margin and
         # does not exceed the hull distance
         assert found, (target, dist)
@@ -126,16 +130,23 @@ def test_separated_pairs_get_a_direction_that_clears_them():
         assert g == pytest.approx(gap(ux, uy, uz, a.vertices, vb), rel=1e-12, abs=1e-15)
 
 
-def test_touching_and_overlapping_pairs_get_none():
-    # Given random pairs with a positive overlap volume, and pairs that touch (B moved along u
-    # to where the overlap volume vanishes: hull distance within round-off of 0)
+def test_overlapping_touching_and_too_close_pairs_get_none():
+    # Given random pairs (size ~1) that overlap, that touch (B moved along u to where the overlap
+    # volume vanishes: hull distance within round-off of 0), or that stand 5e-4 beyond the touch
+    # (hull distance at most 5e-4), searched with margins of 1e-9, 1e-9 and 1e-3
     rng = np.random.default_rng(6)
     for k in range(60):
         a, b0, u = random_pair(rng)
-        if k % 2:  # to the first touch along u
-            vb = b0.vertices + first_shift(lambda t: polyhedron_overlap(a, place(convex_hull(b0.vertices + t * u)))[0]
-                                           > 0.0) * u
-            assert hull_distance(a.vertices, vb) < 1e-7
+        margin = 1e-9
+        if k % 3:
+            touch = first_shift(lambda t: polyhedron_overlap(a, place(convex_hull(b0.vertices + t * u)))[0] > 0.0)
+            if k % 3 == 1:
+                vb = b0.vertices + touch * u
+                assert hull_distance(a.vertices, vb) < 1e-7
+            else:
+                vb = b0.vertices + (touch + 5e-4) * u
+                assert 0.0 < hull_distance(a.vertices, vb) <= 5e-4 * (1 + 1e-6)
+                margin = 1e-3
         else:
             t = rng.uniform(0.0, 0.5)
             for _ in range(40):  # both bodies hold the origin, so a small enough shift overlaps
@@ -144,7 +155,32 @@ def test_touching_and_overlapping_pairs_get_none():
                 t *= 0.5
             vb = b0.vertices + t * u
             assert polyhedron_overlap(a, place(convex_hull(vb)))[0] > 0.0
-        # When GJK searches with a margin of 1e-9
-        found, *_ = separating_direction(a.vertices, vb, *u, 1e-9, 32)
-        # Then it finds nothing (no direction can clear them)
+        # When GJK searches
+        found, *_ = separating_direction(a.vertices, vb, *u, margin, 32, np.empty((4, 3)))
+        # Then it reports none: no direction clears them by the margin (the pairs 5e-4 apart
+        # have directions with gaps between -margin and margin, which a looser success test
+        # would take)
         assert not found
+
+
+def test_degenerate_input_gives_no_direction_and_no_crash():
+    # Given a segment, a flat tetrahedron, repeated points, a NaN start direction and NaN vertices
+    rng = np.random.default_rng(9)
+    a = rng.normal(size=(5, 3))
+    w = np.empty((4, 3))
+    # When the simplex routine gets exact duplicates, collinear and coplanar points
+    for pts in (np.array([a[0], a[0]]), np.array([a[0], a[1], 0.5 * (a[0] + a[1])]),
+                np.array([a[0], a[1], a[2], a[0] + 0.3 * (a[1] - a[0]) + 0.2 * (a[2] - a[0])]),
+                np.array([a[0], a[0], a[0], a[0]])):
+        buf = np.zeros((4, 3))
+        buf[:len(pts)] = pts
+        x, y, z, kept = _closest(buf, len(pts))
+        # Then it returns a point no nearer the origin than the hull's nearest point (or gives
+        # up: kept = 0), never a NaN it keeps using
+        if kept:
+            assert np.linalg.norm([x, y, z]) >= np.linalg.norm(min_norm_point(pts)) - 1e-9
+    # And a search from a NaN direction, or over a vertex set of NaNs, finds no direction
+    assert not separating_direction(a, a + 10.0, np.nan, 1.0, 1.0, 1e-9, 32, w)[0]
+    assert not separating_direction(np.full((4, 3), np.nan), a, 1.0, 0.0, 0.0, 1e-9, 32, w)[0]
+    # (while a clean pair is found from the same start)
+    assert separating_direction(a, a + 10.0, 1.0, 1.0, 1.0, 1e-9, 32, w)[0]
