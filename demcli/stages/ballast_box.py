@@ -90,6 +90,7 @@ def _check_deposit(node, report):
 
 
 def _check_cyclic(node, report):
+    dem.check_dynamics(node, report)
     _check_box(node, report)
     if node.load.max < node.load.min:
         report("load.max", f"must be >= load.min ({node.load.min:g} N)", node.load.max)
@@ -426,6 +427,9 @@ def run_sleeper(ctx, cfg, state_in):
     sh = cfg.shoulders
     if sh.fill:
         top_fill = sh.height if sh.height is not None else s_hi[2]
+        if not top_fill > bed:
+            raise InputError(f"stage {ctx.name}: shoulders.height {top_fill:g} m must be above the bed surface "
+                             f"({bed:.4g} m) to fill the shoulders")
         mat = ctx.case.materials[sh.material]
         solids = 0.0
         regions = []

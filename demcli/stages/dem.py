@@ -204,6 +204,12 @@ def _check(node, report):
     t = node.time
     if (t.duration is None) == (t.steps is None):
         report("time", "give exactly one of duration or steps", None)
+    check_dynamics(node, report)
+
+
+def check_dynamics(node, report):
+    """The checks of a dem stage's contact, bonds, scaling, stop and walls (all but its time
+    section): shared by the stages built on dem's fields with a time section of their own."""
     c = node.contact
     if c.law == "linear" and c.kn is None:
         report("contact.kn", "the linear law needs kn", None)
@@ -236,7 +242,7 @@ def _check(node, report):
     m = node.scaling.mass
     if m != 1.0 and 2.0 ** round(math.log2(m)) != m:
         report("scaling.mass", "must be a power of 2 (1, 2, 4, ..., 1024) so that scaling is exact", m)
-    if node.stop is not None and node.physics.gravity is None:
+    if node.get("stop") is not None and node.physics.gravity is None:
         report("stop", "the kinetic-energy criterion needs gravity (it scales with m g d)", None)
     for k, w in enumerate(node.walls):
         motions = [(f"walls.{k}.motion.{face}", m) for face, m in w.motion.items()] if w.type == "box" else \

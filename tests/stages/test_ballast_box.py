@@ -172,12 +172,30 @@ def test_stiffness_scaling_changes_only_the_moduli():
 @pytest.mark.parametrize("override, rule", [
     ("stages.4.load.max=-1", "must be"),
     ("stages.3.scaling.mass=3", "power of 2"),
+    ("stages.4.scaling.mass=3", "power of 2"),  # the cyclic stages run dem's checks too
+    ("stages.5.scaling.mass=6", "power of 2"),
     ("stages.4.walls=[]", "box wall"),
 ])
 def test_bad_ballast_box_input_is_reported(override, rule):
     result = CliRunner().invoke(cli, ["check", str(SMOKE), "--set", override])
     assert result.exit_code == 2, result.output
     assert rule in result.output
+
+
+def test_shoulder_height_below_the_bed_is_an_input_error(chain, tmp_path):
+    import shutil
+
+    # Given: the smoke chain up to the vibrated bed (its surface is ~0.1 m above the floor)
+    for f in chain.iterdir():
+        if f.name[:2] in ("00", "01", "02", "03", "04"):
+            shutil.copy(f, tmp_path / f.name)
+    # When: the sleeper stage is asked to fill the shoulders up to 1 cm above the floor
+    result = CliRunner().invoke(cli, ["run", str(SMOKE), "--out", str(tmp_path), "--only", "sleeper",
+                                      "--set", "stages.5.shoulders.height=0.01"])
+    # Then: a clear input error names the key and the bed surface (exit 2), and no state is written
+    assert result.exit_code == 2, result.output
+    assert "shoulders.height 0.01 m must be above the bed surface" in result.output
+    assert not (tmp_path / "05-sleeper.h5").exists()
 
 
 def test_compare_overlays_the_runs_records(chain, tmp_path):
