@@ -1,4 +1,5 @@
-"""docs/ballast_trend.py: the power-law trend of sleeper settlement against a known curve."""
+"""docs/ballast_analysis.py: the power-law trend of sleeper settlement and the within-cycle response
+of the loading devices, against known curves."""
 
 import importlib.util
 from pathlib import Path
@@ -6,11 +7,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-SCRIPT = Path(__file__).resolve().parent.parent / "docs" / "ballast_trend.py"
+SCRIPT = Path(__file__).resolve().parent.parent / "docs" / "ballast_analysis.py"
 
 
 def load():
-    spec = importlib.util.spec_from_file_location("ballast_trend", SCRIPT)
+    spec = importlib.util.spec_from_file_location("ballast_analysis", SCRIPT)
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
     return mod
@@ -65,3 +66,30 @@ def test_overlay_csv_gives_the_same_curves_as_the_run_folders(tmp_path):
         cycle, settlement = mod.curves(tmp_path / name)[name]
         np.testing.assert_array_equal(overlay[name][0], cycle)
         np.testing.assert_allclose(overlay[name][1], settlement, rtol=1e-15, atol=0)
+
+
+@pytest.mark.parametrize("lowest", [0.5, 0.6, 0.76])
+def test_response_recovers_swing_and_phase_of_a_known_motion(lowest):
+    # Given dem records of a device that sinks 0.1 mm per cycle and swings 30 mm peak to peak,
+    # lowest at a given phase of each load cycle (0.5 = with the peak load), sampled 4 times per
+    # cycle after 6 samples before the cycles start
+    mod = load()
+    cycle = np.r_[np.linspace(-1.5, -0.25, 6), np.arange(1, 41) * 0.25]
+    phase = np.where(cycle > 0, cycle, 0.0)
+    z = 0.5 - 1e-4 * phase - 0.015 * np.cos(2 * np.pi * (phase - lowest))
+    cols = {"cycle": cycle, "plate": z, "kinetic": 1.0 + cycle ** 2, "coordination": 5.0 - np.abs(np.sin(cycle))}
+    # When the response is fitted per cycle
+    r = mod.response(cols, "plate")
+    # Then every cycle 1..10 is found with the 30 mm swing and the phase of its lowest point (to
+    # the drift's effect, 0.1 mm per cycle against 15 mm), the kinetic energy at its end, the
+    # lowest coordination of its samples, and the height at F_min against the cycle mean
+    assert r[:, 0].tolist() == list(range(1, 11))
+    np.testing.assert_allclose(r[:, 1], 0.030, rtol=0.01)
+    np.testing.assert_allclose(r[:, 2], lowest, atol=0.003)
+    np.testing.assert_allclose(r[:, 3], 1.0 + np.arange(1, 11) ** 2, rtol=1e-12)
+    for n in range(1, 11):
+        k = (cycle > n - 1) & (cycle <= n)
+        assert r[n - 1, 4] == cols["coordination"][k].min()
+        assert r[n - 1, 5] == z[np.isclose(cycle, n)][0]
+    # (the cycle mean is the mean of the 4 samples: the drift puts it 0.375 x 0.1 mm above F_min's)
+    np.testing.assert_allclose(r[:, 5] - r[:, 6], -0.015 * np.cos(2 * np.pi * lowest) - 0.375e-4, rtol=0, atol=1e-12)
