@@ -21,7 +21,8 @@ lower bound on the scatter between realisations, which also differ in their init
 ``records_per_cycle`` samples per load cycle, 4 in the cases) and fits, per load cycle N (the
 samples with N - 1 < cycle <= N), the device's height z(phase) = m + c cos 2 pi phase + s sin
 2 pi phase by least squares (phase = cycle - (N - 1); the load is F_min at phase 0 and 1, F_max
-at 0.5). Per stage: the swing 2 sqrt(c^2 + s^2) [mm]; where in the cycle the device is lowest
+at 0.5), with the fit the stages use for their own ``swing`` and ``lag`` columns (runs made
+before those columns existed are read this way). Per stage: the swing 2 sqrt(c^2 + s^2) [mm]; where in the cycle the device is lowest
 (0.5 for a quasi-static response, which follows the load; 0.75 for a response a quarter cycle
 behind it, as a mass on a spring driven at its natural frequency); the kinetic energy at the end
 of the cycle (F_min) against the one before the first cycle [J]; the lowest coordination number
@@ -73,18 +74,16 @@ def read_columns(path):
 def response(cols, device):
     """Per load cycle N >= 1: (N, swing [m], phase of the lowest point [cycle], kinetic energy at
     F_min [J], lowest coordination [-], height at F_min [m], cycle-mean height [m]), from the dem
-    record columns (cycle, kinetic, coordination, and the device's height ``device``)."""
+    record columns (cycle, kinetic, coordination, and the device's height ``device``); the fit is
+    the stage's own (:func:`demcli.stages.ballast_box.cycle_response`)."""
+    from demcli.stages.ballast_box import cycle_response
+
     cycle, z = cols["cycle"], cols[device]
+    r = cycle_response(cycle, z)
     rows = []
-    for n in range(1, int(np.floor(cycle.max() + 1e-9)) + 1):
+    for n, swing, lag, mean in zip(r["cycle"], r["swing"], r["lag"], r["mean"]):
         k = np.where((cycle > n - 1 + 1e-6) & (cycle <= n + 1e-6))[0]
-        if len(k) < 3 or abs(cycle[k[-1]] - n) > 1e-6:
-            continue
-        phase = 2 * np.pi * (cycle[k] - (n - 1))
-        basis = np.column_stack([np.ones(len(k)), np.cos(phase), np.sin(phase)])
-        (m, c, s), *_ = np.linalg.lstsq(basis, z[k], rcond=None)
-        lowest = (np.arctan2(-s, -c) / (2 * np.pi)) % 1.0
-        rows.append((n, 2 * np.hypot(c, s), lowest, cols["kinetic"][k[-1]], cols["coordination"][k].min(), z[k[-1]], m))
+        rows.append((n, swing, lag + 0.5, cols["kinetic"][k[-1]], cols["coordination"][k].min(), z[k[-1]], mean))
     return np.array(rows)
 
 

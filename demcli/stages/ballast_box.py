@@ -131,6 +131,40 @@ def bed_measures(mass, rho_s, area, height):
             "void_ratio": n / (1.0 - n) if n < 1.0 else math.inf, "particle_mass": mass}
 
 
+def cycle_response(cycle, z):
+    """How a loading device moves within each load cycle, from its sampled height.
+
+    cycle: (n,) load cycles since the cycles started (samples at N - 1 < cycle <= N belong to
+    cycle N; the load is F_min at whole cycles and F_max half way); z: (n,) height [m].
+    Fits z = m + c cos 2 pi phase + s sin 2 pi phase (phase = cycle - (N - 1)) by least squares
+    to each cycle N >= 1 that has at least 3 samples and ends on a sample.
+
+    Returns {cycle N, swing 2 sqrt(c^2 + s^2) [m], lag [cycle], mean m [m]}, lag being how far
+    the lowest point comes after the peak load, in [-0.5, 0.5): 0 for a response that follows
+    the load (quasi-static), 0.25 for a mass on a spring driven at its natural frequency.
+    """
+    cycle = np.asarray(cycle, float)
+    z = np.asarray(z, float)
+    out = {"cycle": [], "swing": [], "lag": [], "mean": []}
+    last = int(np.floor(cycle.max() + 1e-6)) if len(cycle) else 0
+    for n in range(1, last + 1):
+        k = np.where((cycle > n - 1 + 1e-6) & (cycle <= n + 1e-6))[0]
+        if len(k) < 3 or abs(cycle[k[-1]] - n) > 1e-6:
+            continue
+        phase = 2.0 * np.pi * (cycle[k] - (n - 1))
+        basis = np.column_stack([np.ones(len(k)), np.cos(phase), np.sin(phase)])
+        (m, c, s), *_ = np.linalg.lstsq(basis, z[k], rcond=None)
+        lowest = (math.atan2(-s, -c) / (2.0 * np.pi)) % 1.0
+        out["cycle"].append(n)
+        out["swing"].append(2.0 * math.hypot(c, s))
+        out["lag"].append(lowest - 0.5)
+        out["mean"].append(m)
+    return {k: np.asarray(v, int if k == "cycle" else float) for k, v in out.items()}
+
+
+LAG_WARNING = 0.1  # cycles: a loading device lagging the load more than this is logged as dynamic
+
+
 def surface_height(groups, lo, hi, cell):
     """Mean over the (x, y) columns of width ``cell`` of the box of the highest particle point [m]."""
     from demcli.state import State
@@ -249,12 +283,27 @@ def _cyclic(ctx, cfg, state_in, actor, measure, columns, stop=None, finish_extra
     def finish(ctx_, system, state, table):
         _carry(state, state_in)
         rows = table.to_arrays()
-        cyc = RecordTable("cycles", {"cycle": "1", **columns})
+        resp = cycle_response(rows["cycle"], rows[actor])
+        by_cycle = {int(n): k for k, n in enumerate(resp["cycle"])}
+        cyc = RecordTable("cycles", {"cycle": "1", **columns, "swing": "m", "lag": "1"})
         for k in range(len(rows["cycle"])):
             r = {c: rows[c][k] for c in rows}
             if is_cycle_end(r):
-                cyc.append({"cycle": int(round(r["cycle"])), **{c: float(r[c]) for c in columns}})
+                n = int(round(r["cycle"]))
+                j = by_cycle.get(n)
+                cyc.append({"cycle": n, **{c: float(r[c]) for c in columns},
+                            "swing": float(resp["swing"][j]) if j is not None else math.nan,
+                            "lag": float(resp["lag"][j]) if j is not None else math.nan})
         cyc.to_state(state)
+        if len(resp["lag"]):
+            lag = float(np.median(resp["lag"]))
+            msg = (f"{actor} response: lowest {lag:+.2f} cycle after the peak load, swing "
+                   f"{np.median(resp['swing']) * 1e3:.1f} mm (medians over {len(resp['lag'])} cycles)")
+            if abs(lag) > LAG_WARNING:
+                msg += (f"; the loading is not quasi-static (scaling: stiffness x {cfg.scaling.stiffness:g}, "
+                        f"mass x {cfg.scaling.mass:g}): see docs/ballast_box.md, 'How the plate and the "
+                        "sleeper move within a cycle'")
+            ctx_.log(msg)
         if finish_extra is not None:
             finish_extra(ctx_, system, state, cyc)
 
@@ -458,9 +507,10 @@ def run_sleeper(ctx, cfg, state_in):
         from demcli.state import RecordTable
 
         rows = cyc.to_arrays()
-        out = RecordTable("settlement", {"cycle": "1", "sleeper": "m", "settlement": "m"})
-        for c, z in zip(rows["cycle"], rows["sleeper"]):
-            out.append(cycle=int(c), sleeper=float(z), settlement=float(rows["sleeper"][0] - z))
+        out = RecordTable("settlement", {"cycle": "1", "sleeper": "m", "settlement": "m", "swing": "m", "lag": "1"})
+        for c, z, sw, lag in zip(rows["cycle"], rows["sleeper"], rows["swing"], rows["lag"]):
+            out.append(cycle=int(c), sleeper=float(z), settlement=float(rows["sleeper"][0] - z), swing=float(sw),
+                       lag=float(lag))
         out.to_state(state)
         ctx_.write_records(out, x="cycle", ys=["settlement"])
         if len(rows["cycle"]):

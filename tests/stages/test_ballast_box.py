@@ -73,6 +73,39 @@ def test_vibrate_records_density_per_cycle_under_the_plate(chain):
     assert st["bodies/x"][plate, 1] == pytest.approx(0.075, abs=1e-12)
     # and a load cycle compacts the loose bed (measured 0.85 -> 0.99 g/cm^3)
     assert rows["bulk_density"][-1] > rows["bulk_density"][0]
+    # and the plate's response in the cycle (swing, lag of its lowest point behind the peak load)
+    # is the fit of its height over the cycle's dem records; none before the cycles start
+    _check_response(rows, _csv(chain / "records" / "vibrate_dem.csv"), "plate")
+
+
+def _check_response(rows, dem_rows, device):
+    from demcli.stages.ballast_box import cycle_response
+
+    assert np.isnan(rows["swing"][0]) and np.isnan(rows["lag"][0])
+    ref = cycle_response(dem_rows["cycle"], dem_rows[device])
+    assert ref["cycle"].tolist() == [1]
+    assert rows["swing"][1] == ref["swing"][0] and rows["lag"][1] == ref["lag"][0]
+    assert 0.0 < rows["swing"][1] < 0.1 and -0.5 <= rows["lag"][1] < 0.5
+
+
+def test_cycle_response_of_known_motions():
+    from demcli.stages.ballast_box import cycle_response
+
+    # Given a device sampled 4 and 8 times per cycle, moving as m + A cos(2 pi (phase - p_low)) +
+    # a drift, lowest at p_low = 0.5 (with the peak load), 0.75 and 0.3, and a cycle with too few samples
+    for per_cycle in (4, 8):
+        for p_low, lag in ((0.5, 0.0), (0.75, 0.25), (0.3, -0.2)):
+            cycle = np.r_[-0.5, 0.0, np.arange(1, 3 * per_cycle + 1) / per_cycle]
+            phase = np.clip(cycle, 0.0, None)
+            z = 0.4 - 0.01 * np.cos(2 * np.pi * (phase - p_low)) - 1e-6 * phase
+            r = cycle_response(cycle, z)
+            # Then every whole cycle gives the 20 mm swing and the lag, to the drift's effect
+            assert r["cycle"].tolist() == [1, 2, 3]
+            np.testing.assert_allclose(r["swing"], 0.02, rtol=1e-3)
+            np.testing.assert_allclose(r["lag"], lag, atol=1e-4)
+    # and cycles without 3 samples, or not ending on a sample, are left out
+    r = cycle_response(np.array([0.0, 0.5, 1.0, 1.5, 1.75]), np.zeros(5))
+    assert r["cycle"].tolist() == []
 
 
 def test_sleeper_fills_the_shoulders_and_records_settlement(chain):
@@ -95,6 +128,7 @@ def test_sleeper_fills_the_shoulders_and_records_settlement(chain):
     assert rows["sleeper"][-1] == pytest.approx(float(st["bodies/x"][sl, 2]), rel=1e-12)
     # the sleeper sinks under the cyclic load (measured 3.7 mm after one cycle)
     assert rows["settlement"][-1] > 0.0
+    _check_response(rows, _csv(chain / "records" / "sleeper_dem.csv"), "sleeper")
     assert (chain / "records" / "sleeper_settlement.png").exists()
     assert any((chain / "sleeper").glob("*.pvd"))
 
