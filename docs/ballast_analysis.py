@@ -22,9 +22,9 @@ lower bound on the scatter between realisations, which also differ in their init
 samples with N - 1 < cycle <= N), the device's height z(phase) = m + c cos 2 pi phase + s sin
 2 pi phase by least squares (phase = cycle - (N - 1); the load is F_min at phase 0 and 1, F_max
 at 0.5), with the fit the stages use for their own ``swing`` and ``lag`` columns (runs made
-before those columns existed are read this way). Per stage: the swing 2 sqrt(c^2 + s^2) [mm]; where in the cycle the device is lowest
-(0.5 for a quasi-static response, which follows the load; 0.75 for a response a quarter cycle
-behind it, as a mass on a spring driven at its natural frequency); the kinetic energy at the end
+before those columns existed are read this way). Per stage, medians over the cycles: the swing
+2 sqrt(c^2 + s^2) [mm]; where in the cycle the device is lowest (0.5 for a quasi-static
+response, which follows the load; 0.75 a quarter cycle behind it); the kinetic energy at the end
 of the cycle (F_min) against the one before the first cycle [J]; the lowest coordination number
 in the cycle; and the device's height at F_min against its cycle mean m, whose difference is
 how much a reading at F_min depends on where the swing is.

@@ -7,18 +7,17 @@ pair does not touch: a unit direction u with
 
 so that B lies beyond A along u by more than ``margin`` [m] and the exact overlap of the two
 bodies is empty. Checking a remembered u costs one pass over both vertex sets; the exact
-overlap (:func:`demcli.kernels.polyhedra.overlap_ws`) of such a pair costs ~2 us (bench/README.md,
-"Polyhedron narrow phase"). Face normals
-separate most such pairs (the ``P_SEP`` face cache); this covers the rest, pairs separated
-only across two edges.
+overlap (:func:`demcli.kernels.polyhedra.overlap_ws`) of such a pair costs ~2 us
+(bench/README.md, "Polyhedron narrow phase"). Face normals separate most such pairs (the
+``P_SEP`` face cache); this covers the rest, pairs separated only across two edges.
 
 Search (:func:`separating_direction`): the GJK distance iteration (Gilbert, Johnson & Keerthi
 1988, "A fast procedure for computing the distance between complex objects in three-dimensional
 space", IEEE J. Robot. Autom. 4(2)) on the Minkowski difference D = B - A = {b - a}. A simplex W
 of up to four support points of D is reduced each iteration to the face, edge or vertex that
 holds its point v closest to the origin (closest point of a triangle to a point: Ericson 2005,
-"Real-Time Collision Detection", sec. 5.1.5; of a tetrahedron: sec. 5.1.6); the next support point s minimises v . x over D
-(s = argmin_b v . b - argmax_a v . a). It stops with
+"Real-Time Collision Detection", sec. 5.1.5; of a tetrahedron: sec. 5.1.6); the next support
+point s minimises v . x over D (s = argmin_b v . b - argmax_a v . a). It stops with
 
 * success when gap(v / |v|) > margin: u . s = min over D of u . x, the test the cache repeats;
 * failure when v no longer moves toward the origin (|v|^2 - v . s <= 1e-12 |v|^2: v is the

@@ -141,7 +141,8 @@ def cycle_response(cycle, z):
 
     Returns {cycle N, swing 2 sqrt(c^2 + s^2) [m], lag [cycle], mean m [m]}, lag being how far
     the lowest point comes after the peak load, in [-0.5, 0.5): 0 for a response that follows
-    the load (quasi-static), 0.25 for a mass on a spring driven at its natural frequency.
+    the load (quasi-static), 0.25 a quarter cycle behind it (a mass on a spring driven at its
+    natural frequency, or a plate that bounces).
     """
     cycle = np.asarray(cycle, float)
     z = np.asarray(z, float)
