@@ -36,6 +36,8 @@ from pathlib import Path
 import numpy as np
 from scipy.optimize import curve_fit
 
+from demcli.compare import read_record
+
 
 def power_law(n, a, b):
     """s = a N^b [mm]."""
@@ -61,14 +63,6 @@ def trend(cycle, settlement):
     (a, b), _ = curve_fit(power_law, n, s, p0=(5.0, 0.5))
     res = s - power_law(n, a, b)
     return a, b, float(np.sqrt(np.mean(res ** 2))), float(np.abs(res).max()), power_law(n[-1], a, b), s[-1], int(n[-1])
-
-
-def read_columns(path):
-    """{column name without its unit: array} of a record CSV."""
-    with open(path) as f:
-        header = f.readline().strip().split(",")
-    data = np.atleast_2d(np.genfromtxt(path, delimiter=",", skip_header=1))
-    return {h.split("[")[0]: data[:, k] for k, h in enumerate(header)}
 
 
 def response(cols, device):
@@ -105,7 +99,7 @@ def main(argv):
             f = Path(path) / "records" / f"{stage}_dem.csv"
             if not f.exists():
                 continue
-            cols = read_columns(f)
+            cols = read_record(f)[0]
             r = response(cols, device)
             if not len(r):
                 continue
