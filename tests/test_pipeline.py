@@ -97,6 +97,30 @@ def test_interrupted_and_resumed_equals_uninterrupted(smoke_case, tmp_path, monk
     assert h5_differences(tmp_path / "ref" / "01-settle.h5", tmp_path / "run" / "01-settle.h5") == []
 
 
+def test_a_stage_continues_elsewhere_from_its_input_and_checkpoint_alone(smoke_case, tmp_path, monkeypatch,
+                                                                         h5_differences):
+    # Given an uninterrupted reference run and a run interrupted in its second stage
+    import shutil
+
+    run_case(smoke_case, out=tmp_path / "ref", quiet=True)
+    restore = _raise_at_chunk(monkeypatch, KeyboardInterrupt, 12)
+    with pytest.raises(StageError, match="interrupted at step"):
+        run_case(smoke_case, out=tmp_path / "run", quiet=True)
+    restore()
+    # When only the stage's input state and its checkpoint are carried to a new folder (another
+    # machine, a later batch job) and the run goes on from that stage
+    moved = tmp_path / "moved"
+    moved.mkdir()
+    for name in ("00-pour.h5", "01-settle.ckpt.h5"):
+        shutil.copy2(tmp_path / "run" / name, moved / name)
+    res = run_case(smoke_case, out=moved, quiet=True, resume=True, from_stage="settle")
+    # Then it continued from the checkpoint (gone now) to the uninterrupted result, bit for bit
+    assert [r.name for r in res] == ["settle"]
+    assert "[settle] resuming from 01-settle.ckpt.h5 at step" in (moved / "log.txt").read_text()
+    assert not (moved / "01-settle.ckpt.h5").exists()
+    assert h5_differences(tmp_path / "ref" / "01-settle.h5", moved / "01-settle.h5") == []
+
+
 class _Crash(BaseException):
     """A hard stop (power cut, kill -9, a job's time limit without a signal): nothing is written."""
 
