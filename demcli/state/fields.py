@@ -166,6 +166,8 @@ _reg("meta", "time", "f", (), "s", "simulated time", **_M)
 _reg("meta", "step", "i", (), "", "time step count", **_M)
 _reg("meta", "dt", "f", (), "s", "time step", **_M)
 _reg("meta", "created_by", "str", (), "", "program that wrote the file, e.g. 'demcli 0.1.0'", **_M)
+_reg("meta", "machine", "str", (), "", "CPU model, the CPU numba compiled for, OS and numerical library versions "
+     "(what decides round-off besides the case; provenance, not in state_hash)", required=False, **_M)
 
 register_group("bodies", "Rigid bodies (clumps); a single sphere is a body with one sphere",
                required=True)
@@ -391,12 +393,13 @@ def new_state(stage, stage_type, *, dim=3, seed=0, case_file="", case_hash="", c
               input_hash="", effects=(), time=0.0, step=0, dt=0.0, **extra_meta) -> State:
     """A State with complete meta (versions and schema filled in) and no groups yet."""
     from demcli import __version__
+    from demcli.machine import machine
 
     meta = dict(schema_version=SCHEMA_VERSION, demcli_version=__version__, stage=str(stage),
                 stage_type=str(stage_type), case_file=str(case_file), case_hash=str(case_hash),
                 config_hash=str(config_hash), input_hash=str(input_hash), seed=int(seed),
                 effects=[str(e) for e in effects], dim=int(dim), time=float(time), step=int(step),
-                dt=float(dt), created_by=f"demcli {__version__}")
+                dt=float(dt), created_by=f"demcli {__version__}", machine=machine())
     meta.update(extra_meta)
     return State(meta=meta)
 

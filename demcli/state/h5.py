@@ -322,6 +322,8 @@ def summarize(path) -> str:
     lines = [f"{path}  ({size / 1e6:.3g} MB, schema_version {m.get('schema_version')})"]
     lines.append(f"  stage      {m.get('stage', '?')} ({m.get('stage_type', '?')}), "
                  f"written by {m.get('created_by', '?')}")
+    if m.get("machine"):
+        lines.append(f"  machine    {m['machine']}")
     if m.get("case_file") or m.get("case_hash"):
         lines.append(f"  case       {m.get('case_file') or '-'}  sha256 {str(m.get('case_hash', ''))[:16]}")
     hashes = [f"{k.split('_')[0]} {str(m[k])[:16]}" for k in ("config_hash", "input_hash") if m.get(k)]

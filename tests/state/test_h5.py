@@ -60,10 +60,29 @@ def test_state_hash_ignores_provenance_and_tracks_data(tmp_path, state):
     other = state.copy()
     other.meta["stage"] = "renamed"
     other.meta["created_by"] = "someone else"
+    other.meta["machine"] = "another CPU (numba target other); numpy 0"
     assert state_hash(other) == h
     # When one coordinate moves by one ulp, the hash changes
     other["bodies/x"][0, 0] = np.nextafter(other["bodies/x"][0, 0], 1.0)
     assert state_hash(other) != h
+
+
+def test_a_state_names_the_machine_that_computed_it(tmp_path, state):
+    # Given a new state and the machine's own description
+    import llvmlite.binding as llvm
+    import numba
+
+    from demcli.state.fields import new_state
+
+    meta = new_state("settle", "dem").meta
+    # Then it names the CPU numba compiles for and the numerical libraries' versions
+    assert f"numba target {llvm.get_host_cpu_name()}" in meta["machine"]
+    assert f"numba {numba.__version__}" in meta["machine"] and f"numpy {np.__version__}" in meta["machine"]
+    # and keeps it through a file; a file written without it (older demcli) still reads
+    back = read_state(write_state(tmp_path / "s.h5", state))
+    assert back.meta["machine"] == state.meta["machine"]
+    del state.meta["machine"]
+    assert "machine" not in read_state(write_state(tmp_path / "old.h5", state)).meta
 
 
 def test_int32_input_is_stored_as_int64_and_hashes_alike(tmp_path, state):
@@ -176,7 +195,7 @@ def test_read_meta_and_summary(good_file, state):
     # When summarized
     text = summarize(good_file)
     # Then the summary has stage, counts, time, energy, records, extent, radius
-    for expected in ("stage      demo (compaction)", "4 bodies", "12 spheres", "11 contacts",
+    for expected in ("stage      demo (compaction)", f"machine    {state.meta['machine']}", "4 bodies", "12 spheres", "11 contacts",
                      "step 250", "kinetic", "energy: 6 rows (time, kinetic, step)",
                      "extent", "radius     mean", "validation ok"):
         assert expected in text, expected
