@@ -1,5 +1,6 @@
 """The staged pipeline: outputs, skipping, determinism, resume, guards, only-declared effects."""
 
+import shutil
 import subprocess
 import sys
 
@@ -100,8 +101,6 @@ def test_interrupted_and_resumed_equals_uninterrupted(smoke_case, tmp_path, monk
 def test_a_stage_continues_elsewhere_from_its_input_and_checkpoint_alone(smoke_case, tmp_path, monkeypatch,
                                                                          h5_differences):
     # Given an uninterrupted reference run and a run interrupted in its second stage
-    import shutil
-
     run_case(smoke_case, out=tmp_path / "ref", quiet=True)
     restore = _raise_at_chunk(monkeypatch, KeyboardInterrupt, 12)
     with pytest.raises(StageError, match="interrupted at step"):

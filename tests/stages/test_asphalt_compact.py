@@ -48,7 +48,7 @@ def test_servo_walls_reach_the_target_stress_and_porosity_is_recorded(smoke_run)
     assert p[0] == pytest.approx(float(comp["porosity_initial"])) and p[0] > 0.8
     assert float(comp["porosity_final"]) < 0.6 and p[-1] == pytest.approx(float(comp["porosity_final"]))
     # walls close in; the box grows back only where the servo overshoots the target stress and
-    # backs off (by 0.1 % porosity at most between two records, on a fall of ~0.29), far less
+    # backs off (by up to ~1e-3 in porosity between two records, on a fall of ~0.29), far less
     # than a servo pushing the wrong way would
     fall = p[0] - p[-1]
     assert np.all(np.diff(p) <= 0.01 * fall) and p[-1] - np.min(p) <= 0.01 * fall

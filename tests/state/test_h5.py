@@ -195,7 +195,8 @@ def test_read_meta_and_summary(good_file, state):
     # When summarized
     text = summarize(good_file)
     # Then the summary has stage, counts, time, energy, records, extent, radius
-    for expected in ("stage      demo (compaction)", f"machine    {state.meta['machine']}", "4 bodies", "12 spheres", "11 contacts",
+    for expected in ("stage      demo (compaction)", f"machine    {state.meta['machine']}", "4 bodies",
+                     "12 spheres", "11 contacts",
                      "step 250", "kinetic", "energy: 6 rows (time, kinetic, step)",
                      "extent", "radius     mean", "validation ok"):
         assert expected in text, expected
