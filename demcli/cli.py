@@ -66,11 +66,14 @@ def info(state):
 @click.option("-y", "ys", multiple=True, help="Column(s) to plot (default: all others).")
 @click.option("--out", default="compare", show_default=True, type=click.Path(file_okay=False),
               help="Folder for the PNG and CSV files.")
-def compare(runs, record, x, ys, out):
+@click.option("--with", "earlier", multiple=True, type=click.Path(dir_okay=False, exists=True),
+              help="A CSV written by an earlier compare: its curves join the figure with the same columns "
+                   "(runs whose folders are gone).")
+def compare(runs, record, x, ys, out, earlier):
     """Overlay a record of several RUNS (run folders) in one figure per column."""
     from demcli.compare import compare as _compare
 
-    for path in _compare(runs, record=record, x=x, ys=ys, out=out):
+    for path in _compare(runs, record=record, x=x, ys=ys, out=out, earlier=earlier):
         click.echo(path)
 
 

@@ -4,7 +4,9 @@ The seed-002 figures put the three gradations side by side: bulk density and voi
 ratio against vibration cycles (Figs. 9-10) and accumulated sleeper settlement against
 load cycles (Fig. 12). Each run folder keeps its records as ``records/<stage>_<table>.csv``
 (header ``name[unit]``); this module reads the same record from every run and draws
-one PNG per column, with a long-format CSV (run, x, y) beside it.
+one PNG per column, with a long-format CSV (run, x, y) beside it. That CSV can come back
+as ``earlier`` curves (``--with``): runs whose folders are gone, or were made elsewhere,
+stay in the figures without their run folders.
 """
 
 import csv
@@ -23,28 +25,58 @@ SEED_FIGURES = {"vibrate_cycles": [("cycle", ["bulk_density", "void_ratio"])],  
                                 ("distortional_strain", ["volumetric_strain"])]}         # seed 003, Figs. 4-5
 
 
+def _columns(header):
+    """([name, ...], {name: unit}) of CSV headers written as ``name[unit]``."""
+    names, units = [], {}
+    for h in header:
+        name, _, unit = h.partition("[")
+        names.append(name)
+        units[name] = unit.rstrip("]")
+    return names, units
+
+
 def read_record(path):
     """({column: array}, {column: unit}) of a record CSV written by :class:`RecordTable`."""
     with open(path, newline="") as f:
         rows = list(csv.reader(line for line in f if not line.startswith("#")))
     if not rows:
         raise InputError(f"{path}: empty record file")
-    names, units = [], {}
-    for h in rows[0]:
-        name, _, unit = h.partition("[")
-        names.append(name)
-        units[name] = unit.rstrip("]")
+    names, units = _columns(rows[0])
     data = {n: np.array([float(r[k]) for r in rows[1:]]) for k, n in enumerate(names)}
     return data, units
 
 
-def compare(runs, record=None, x=None, ys=None, out="compare"):
+def read_long(path):
+    """Curves of a long CSV written by :func:`compare`: (x column, y column, {column: unit}, {run: (x, y)})."""
+    path = Path(path)
+    with open(path, newline="") as f:
+        rows = list(csv.reader(f))
+    if not rows or len(rows[0]) != 3 or rows[0][0] != "run":
+        raise InputError(f"{path}: not a demcli compare CSV (header must be run,x[unit],y[unit]; "
+                         f"got {','.join(rows[0]) if rows else 'an empty file'})")
+    cols, units = _columns(rows[0][1:])
+    curves = {}
+    for line, r in enumerate(rows[1:], start=2):
+        try:
+            xv, yv = float(r[1]), float(r[2])
+        except (IndexError, ValueError):
+            raise InputError(f"{path}, line {line}: expected run,x,y with numbers; got {','.join(r)}") from None
+        curves.setdefault(r[0], ([], []))
+        curves[r[0]][0].append(xv)
+        curves[r[0]][1].append(yv)
+    return cols[0], cols[1], units, {k: (np.array(a), np.array(b)) for k, (a, b) in curves.items()}
+
+
+def compare(runs, record=None, x=None, ys=None, out="compare", earlier=()):
     """Overlay ``record`` (a file stem such as ``vibrate_cycles``) of every run folder.
 
     Without ``record``: every record of :data:`SEED_FIGURES` that all runs have.
-    Returns the written paths.
+    ``earlier``: long CSVs of a previous comparison; each joins the figure with its x and y
+    columns, its curves drawn first (a name that a run folder also has gets the file's name
+    appended). Returns the written paths.
     """
     runs = [Path(r) for r in runs]
+    earlier = [(Path(p), *read_long(p)) for p in earlier]
     for r in runs:
         if not (r / "records").is_dir():
             raise InputError(f"{r}: not a run folder (no records/ inside)")
@@ -54,7 +86,7 @@ def compare(runs, record=None, x=None, ys=None, out="compare"):
         raise InputError("the runs share none of the records " + ", ".join(SEED_FIGURES) + "; name one with --record")
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    written = []
+    written, used = [], set()
     for stem, figures in todo.items():
         tables = {}
         for r in runs:
@@ -63,12 +95,16 @@ def compare(runs, record=None, x=None, ys=None, out="compare"):
                 raise InputError(f"{r}: no record {stem} ({path})")
             tables[r.name] = read_record(path)
         for xcol, ycols in figures:
-            written += _overlay(out, stem, tables, xcol, ycols)
+            written += _overlay(out, stem, tables, xcol, ycols, earlier, used)
+    for path, xcol, ycol, *_ in earlier:
+        if path not in used:
+            raise InputError(f"{path}: its curves ({ycol} against {xcol}) belong to none of the figures drawn "
+                             f"({', '.join(todo)})")
     return written
 
 
-def _overlay(out, stem, tables, xcol, ycols):
-    """One PNG and one long CSV per y column of ``stem`` from every run's table."""
+def _overlay(out, stem, tables, xcol, ycols, earlier, used):
+    """One PNG and one long CSV per y column of ``stem``: the matching ``earlier`` curves, then every run's."""
     written = []
     first, units = next(iter(tables.values()))
     xcol = xcol or next(iter(first))
@@ -78,14 +114,23 @@ def _overlay(out, stem, tables, xcol, ycols):
             if col not in data:
                 raise InputError(f"run {name}: record {stem} has no column {col!r} (columns: {list(data)})")
     for col in ycols:
+        series = {}
+        for path, ex, ey, eunits, curves in earlier:
+            if (ex, ey) != (xcol, col):
+                continue
+            if (eunits[ex], eunits[ey]) != (units[xcol], units[col]):
+                raise InputError(f"{path}: units [{eunits[ex]}], [{eunits[ey]}] differ from the runs' "
+                                 f"[{units[xcol]}], [{units[col]}] for {col} against {xcol}")
+            used.add(path)
+            series.update({name if name not in tables else f"{name} ({path.name})": xy for name, xy in curves.items()})
+        series.update({name: (data[xcol], data[col]) for name, (data, _) in tables.items()})
         lines = ["run,{}[{}],{}[{}]".format(xcol, units[xcol], col, units[col])]
-        for name, (data, _) in tables.items():
-            lines += [f"{name},{xv!r},{yv!r}" for xv, yv in zip(data[xcol].tolist(), data[col].tolist())]
+        for name, (xv, yv) in series.items():
+            lines += [f"{name},{a!r},{b!r}" for a, b in zip(xv.tolist(), yv.tolist())]
         csv_path = out / f"{stem}_{col}.csv"
         atomic_write_text(csv_path, "\n".join(lines) + "\n")
         png = out / f"{stem}_{col}.png"
-        plot_lines(png, {name: (data[xcol], data[col]) for name, (data, _) in tables.items()},
-                   xlabel=f"{xcol} [{units[xcol]}]" if units[xcol] else xcol,
+        plot_lines(png, series, xlabel=f"{xcol} [{units[xcol]}]" if units[xcol] else xcol,
                    ylabel=f"{col} [{units[col]}]" if units[col] else col, title=stem, marker="o")
         written += [csv_path, png]
     return written

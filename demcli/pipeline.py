@@ -127,7 +127,10 @@ class StageContext:
         if st.meta.get("config_hash") != self.config_hash or st.meta.get("input_hash") != self.input_hash:
             self.log("checkpoint is from another config or input; starting the stage afresh")
             return None
-        self.log(f"resuming from {self.checkpoint_path.name} at step {int(st.meta.get('step', 0))}")
+        at = f"step {int(st.meta.get('step', 0))}"
+        if "time" in st.meta:
+            at += f" (t = {float(st.meta['time']):.6g} s)"
+        self.log(f"resuming from {self.checkpoint_path.name} at {at}")
         return st
 
     def write_checkpoint(self, state):

@@ -698,7 +698,6 @@ def integrate(ctx, cfg, state_in, hooks=None):
         system.eacc[:] = c["eacc"]
         system.ke_limit = float(c["ke_limit"][0])
         system.prime = False  # the stored loads are those of the interrupted run
-        ctx.log(f"resuming from checkpoint at step {system.step} (t = {system.time:.6g} s)")
     else:
         system.ke_limit = cfg.safety.energy_limit * reference_energy(system)
     hooks = hooks or Hooks()

@@ -171,7 +171,7 @@ def test_a_bonded_stage_resumes_bit_identically(bonded_run, tmp_path, monkeypatc
         run_case(path, out=out, quiet=True, from_stage="bonded")
     monkeypatch.setattr(system_mod.System, "advance", real)
     run_case(path, out=out, quiet=True, resume=True)
-    assert "resuming from checkpoint" in (out / "log.txt").read_text()
+    assert "resuming from 06-bonded.ckpt.h5 at step 100 (t = " in (out / "log.txt").read_text()
     a, b = read_state(bonded_run / "06-bonded.h5"), read_state(out / "06-bonded.h5")
     for key in ("bodies/x", "bodies/v", "bodies/omega", "bonds/state", "bonds/force_s", "contacts/ft"):
         assert np.array_equal(np.asarray(a[key]), np.asarray(b[key])), key

@@ -254,6 +254,37 @@ def test_compare_overlays_the_runs_records(chain, tmp_path):
     assert bad.exit_code == 2 and "not a run folder" in bad.output
 
 
+def test_compare_keeps_the_curves_of_runs_whose_folders_are_gone(chain, tmp_path):
+    # Given: an earlier comparison's CSV of the settlement, from this run under two names
+    first = tmp_path / "first"
+    CliRunner().invoke(cli, ["compare", str(chain), "--record", "sleeper_settlement", "-y", "settlement",
+                             "--out", str(first)])
+    src = _csv(chain / "records" / "sleeper_settlement.csv")
+    old = (first / "sleeper_settlement_settlement.csv").read_text().splitlines()
+    earlier = tmp_path / "earlier.csv"
+    earlier.write_text("\n".join(old + [line.replace(chain.name, "gone_run", 1) for line in old[1:]]) + "\n")
+    # When: the run folder is compared again with that CSV
+    result = CliRunner().invoke(cli, ["compare", str(chain), "--with", str(earlier), "--out", str(tmp_path / "cmp")])
+    assert result.exit_code == 0, result.output
+    # Then: the earlier curves come first, the one sharing the run folder's name labelled with its file
+    lines = (tmp_path / "cmp" / "sleeper_settlement_settlement.csv").read_text().splitlines()
+    n = len(src["cycle"])
+    assert lines[0] == old[0]
+    assert [line.split(",")[0] for line in lines[1:]] == (
+        [f"{chain.name} (earlier.csv)"] * n + ["gone_run"] * n + [chain.name] * n)
+    ys = [float(line.split(",")[2]) for line in lines[1:]]
+    assert ys[:n] == ys[n:2 * n] == ys[2 * n:] == src["settlement"].tolist()
+    # and a CSV that is not a comparison, or fits none of the figures drawn, is an input error (exit 2)
+    bad = tmp_path / "bad.csv"
+    bad.write_text("cycle[1],settlement[m]\n1,0.1\n")
+    out = CliRunner().invoke(cli, ["compare", str(chain), "--with", str(bad), "--out", str(tmp_path / "x")])
+    assert out.exit_code == 2 and "not a demcli compare CSV" in out.output
+    density = tmp_path / "cmp" / "vibrate_cycles_bulk_density.csv"
+    out = CliRunner().invoke(cli, ["compare", str(chain), "--record", "sleeper_settlement", "--with", str(density),
+                                   "--out", str(tmp_path / "x")])
+    assert out.exit_code == 2 and "belong to none of the figures drawn (sleeper_settlement)" in out.output
+
+
 def test_interrupted_sleeper_stage_resumes_bit_identically(chain, tmp_path, h5_differences, interrupt_and_resume):
     import shutil
 
