@@ -2,7 +2,7 @@
 loading device moves within each load cycle.
 
     python docs/ballast_analysis.py trend runs/ballast_wide runs/ballast_single_large [...]
-    python docs/ballast_analysis.py trend docs/ballast_figures_full/sleeper_settlement_settlement.csv
+    python docs/ballast_analysis.py trend docs/ballast_figures_full/xeon/sleeper_settlement_settlement.csv
     python docs/ballast_analysis.py response runs/ballast_wide [...]
 
 ``trend`` reads each run's ``records/sleeper_settlement.csv`` (cycle, sleeper height [m],
