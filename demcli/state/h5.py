@@ -3,8 +3,10 @@
 Layout: ``/meta`` holds the meta dict as attributes; every other State group is an
 HDF5 group of the same path holding its datasets (each with a ``unit`` attribute) and
 its group attributes. Files are deterministic: datasets and attributes are written in
-sorted order, contiguous, without timestamps (h5py's ``track_times=False``), so the same
-State gives a byte-identical file. Writes are atomic (:mod:`demcli.state.atomic`).
+sorted order, without timestamps (h5py's ``track_times=False``), so the same State gives a
+byte-identical file. Numeric datasets of :data:`COMPRESS_MIN_BYTES` and more are stored
+deflated (HDF5's built-in gzip filter, after its byte shuffle), the others contiguous.
+Writes are atomic (:mod:`demcli.state.atomic`).
 """
 
 from __future__ import annotations
@@ -23,6 +25,14 @@ from demcli.state.fields import FIELDS, GROUPS, SCHEMA_VERSION, State
 
 PHYSICS_META = ("dim", "dt", "effects", "schema_version", "seed", "step", "time")
 """Meta keys that enter :func:`state_hash` (provenance, names and hashes do not)."""
+
+COMPRESS_MIN_BYTES = 65536
+"""Numeric datasets this large or larger are written with ``shuffle`` + gzip level 1.
+
+A ballast state is mostly its per-stone polyhedra (vertices, faces, edges): deflated they
+take half the bytes (10.0 MB -> 5.3 MB for the single-small bed after vibration) for about
+0.1 s more per write and 0.3 s per read; higher levels gain 1 % more for nine times the write
+time. Every HDF5 build has the filter, so plain h5py reads the files as before."""
 
 MIGRATIONS: dict = {}
 """schema_version -> function(State) -> State upgrading it by one version (none yet)."""
@@ -134,7 +144,10 @@ def write_state(path, state: State, *, validate: bool = True) -> Path:
                 data = state.groups.get(gname, {})
                 for name in sorted(data):
                     arr = _disk_array(f"{gname}/{name}", data[name])
-                    ds = grp.create_dataset(name, data=arr, track_times=False)
+                    deflate = arr.dtype.kind in "biuf" and arr.nbytes >= COMPRESS_MIN_BYTES
+                    ds = grp.create_dataset(name, data=arr, track_times=False,
+                                            **({"compression": "gzip", "compression_opts": 1, "shuffle": True}
+                                               if deflate else {}))
                     unit = _dataset_unit(gname, name, state)
                     if unit:
                         ds.attrs["unit"] = unit

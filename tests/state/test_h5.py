@@ -52,6 +52,24 @@ def test_two_writes_are_byte_identical(tmp_path, state):
     assert a.read_bytes() == b.read_bytes() == c.read_bytes()
 
 
+def test_large_datasets_are_stored_deflated_and_read_back_exactly(tmp_path):
+    from demcli.state.h5 import COMPRESS_MIN_BYTES
+
+    # Given a state of 3000 bodies: 72 kB per (n_b, 3) float array, above the threshold
+    big = example_state(n_bodies=3000, spheres_per_body=1)
+    assert big["bodies/x"].nbytes >= COMPRESS_MIN_BYTES > big["bodies/mass"].nbytes
+    # When written twice
+    a, b = write_state(tmp_path / "a.h5", big), write_state(tmp_path / "b.h5", big)
+    # Then the large numeric datasets are deflated, the small ones contiguous, the files identical
+    with h5py.File(a) as f:
+        assert f["bodies/x"].compression == "gzip" and f["bodies/x"].shuffle
+        assert f["bodies/mass"].compression is None and f["bodies/mass"].chunks is None
+        assert np.array_equal(f["bodies/x"][()], big["bodies/x"])  # plain h5py reads them
+    assert a.read_bytes() == b.read_bytes()
+    # and the state reads back equal, bit for bit
+    assert read_state(a) == big
+
+
 def test_state_hash_ignores_provenance_and_tracks_data(tmp_path, state):
     # Given a state and its copy read back from disk
     h = state_hash(state)
