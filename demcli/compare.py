@@ -72,8 +72,8 @@ def compare(runs, record=None, x=None, ys=None, out="compare", earlier=()):
 
     Without ``record``: every record of :data:`SEED_FIGURES` that all runs have.
     ``earlier``: long CSVs of a previous comparison; each joins the figure with its x and y
-    columns, its curves drawn first (a name that a run folder also has gets the file's name
-    appended). Returns the written paths.
+    columns, its curves drawn first (a name that a run folder or an earlier file also has gets
+    the file's name appended). Returns the written paths.
     """
     runs = [Path(r) for r in runs]
     earlier = [(Path(p), *read_long(p)) for p in earlier]
@@ -122,7 +122,8 @@ def _overlay(out, stem, tables, xcol, ycols, earlier, used):
                 raise InputError(f"{path}: units [{eunits[ex]}], [{eunits[ey]}] differ from the runs' "
                                  f"[{units[xcol]}], [{units[col]}] for {col} against {xcol}")
             used.add(path)
-            series.update({name if name not in tables else f"{name} ({path.name})": xy for name, xy in curves.items()})
+            for name, xy in curves.items():  # a name already taken gets its file's name appended
+                series[name if name not in tables and name not in series else f"{name} ({path.name})"] = xy
         series.update({name: (data[xcol], data[col]) for name, (data, _) in tables.items()})
         lines = ["run,{}[{}],{}[{}]".format(xcol, units[xcol], col, units[col])]
         for name, (xv, yv) in series.items():
