@@ -96,9 +96,10 @@ class StageContext:
     def log(self, message):
         self.runner.log(f"[{self.name}] {message}")
 
-    def progress(self, total, start):
-        n = getattr(self, "_nparticles", 1)
-        return Progress(self.name, total, start, self.runner.quiet, n)
+    def progress(self, total, start, nparticles):
+        """A :class:`Progress` for steps ``start``..``total`` of ``nparticles`` particles (the system
+        being stepped, as the stage's closing throughput line counts them)."""
+        return Progress(self.name, total, start, self.runner.quiet, nparticles)
 
     # ---- states ----
     def new_state(self, effects=(), time=0.0, step=0, dt=0.0):
@@ -265,10 +266,6 @@ class Runner:
                 if moved:
                     self.log(f"[{cfg.name}] particles stored in cell order (neighbours close in memory)")
                 ctx = StageContext(self, k, cfg, chash, input_hash)
-                if state_in is not None and "spheres" in state_in.groups:
-                    # spheres, or bodies when the particles are polyhedra (no spheres)
-                    ctx._nparticles = (len(state_in.groups["spheres"]["radius"])
-                                       or len(state_in.groups["bodies"]["mass"]))
                 self.log(f"[{cfg.name}] {cfg.type} stage started")
                 t0 = _time.perf_counter()
                 try:

@@ -1,9 +1,11 @@
-"""Two looks at the cyclic records of ballast box runs: the settlement's smooth trend, and how the
-loading device moves within each load cycle.
+"""Three looks at the cyclic stages of ballast box runs: the settlement's smooth trend, how the
+loading device moves within each load cycle, and how much of the sleeper's settlement is stones
+leaving the column under it.
 
     python docs/ballast_analysis.py trend runs/ballast_wide runs/ballast_single_large [...]
-    python docs/ballast_analysis.py trend docs/ballast_figures_full/xeon/sleeper_settlement_settlement.csv
+    python docs/ballast_analysis.py trend docs/ballast_figures_full/sleeper_settlement_settlement.csv
     python docs/ballast_analysis.py response runs/ballast_wide [...]
+    python docs/ballast_analysis.py column runs/ballast_single_small
 
 ``trend`` reads each run's ``records/sleeper_settlement.csv`` (cycle, sleeper height [m],
 settlement [m]), or the overlay CSV that ``demcli compare --record sleeper_settlement`` writes
@@ -28,6 +30,19 @@ response, which follows the load; 0.75 a quarter cycle behind it); the kinetic e
 of the cycle (F_min) against the one before the first cycle [J]; the lowest coordination number
 in the cycle; and the device's height at F_min against its cycle mean m, whose difference is
 how much a reading at F_min depends on where the swing is.
+
+``column`` reads a run's sleeper snapshots (``sleeper/polyhedra.pvd`` and its VTU files) and,
+per snapshot, takes each stone's volume and centroid from its triangulated surface
+(``demcli.geometry.polyhedron.mass_properties``) and counts the stones whose centroid lies in
+the column under the sleeper (inside its footprint in x and y, below its base). Per snapshot: the
+load cycle (from the time, by the dem record's time and cycle columns; negative while the
+sleeper settles under F_min), the sleeper's base height h [mm], the stones and the solid volume
+V_s under it, the column's solid fraction phi = V_s / (A h) for the footprint area A, and the
+stones whose centroid is above the sleeper's top inside its footprint (shoulder stones that have
+spilled onto it). Against the first snapshot: how far the base has sunk, and how much of that
+the solids that left the column account for, (V_s,0 - V_s) / (phi A) [mm], the rest being
+compaction of the column (and, between snapshots at different phases of a load cycle, the
+elastic and dynamic swing: compare snapshots at the same phase).
 """
 
 import sys
@@ -81,6 +96,56 @@ def response(cols, device):
     return np.array(rows)
 
 
+def _stones(vtu):
+    """(volume [m^3], centroid [m], lowest point [m], highest point [m], material index) per body of a
+    polyhedra snapshot."""
+    import meshio
+
+    from demcli.geometry.polyhedron import mass_properties
+
+    mesh = meshio.read(vtu)
+    tri = mesh.cells_dict["triangle"]
+    body = mesh.cell_data_dict["body"]["triangle"]
+    material = mesh.cell_data_dict["material"]["triangle"]
+    order = np.argsort(body, kind="stable")
+    starts = np.searchsorted(body[order], np.arange(body.max() + 2))
+    n = body.max() + 1
+    volume, centroid = np.zeros(n), np.zeros((n, 3))
+    low, high, mat = np.zeros((n, 3)), np.zeros((n, 3)), np.zeros(n, int)
+    for k in range(n):
+        t = tri[order[starts[k]:starts[k + 1]]]
+        used, local = np.unique(t, return_inverse=True)
+        pts = mesh.points[used]
+        volume[k], centroid[k], _ = mass_properties(pts, local.reshape(t.shape))
+        low[k], high[k] = pts.min(axis=0), pts.max(axis=0)
+        mat[k] = material[order[starts[k]]]
+    return volume, centroid, low, high, mat
+
+
+def column(run, sleeper_material=None):
+    """Rows (time [s], cycle, base [m], stones under, V_s [m^3], phi, stones on top, A [m^2]) per sleeper
+    snapshot of a run folder; the sleeper is the body of ``sleeper_material`` (default: the
+    highest material index, the one the sleeper stage adds last)."""
+    import xml.etree.ElementTree as ET
+
+    run = Path(run)
+    sets = ET.parse(run / "sleeper" / "polyhedra.pvd").getroot().iter("DataSet")
+    files = dict((float(d.get("timestep")), d.get("file")) for d in sets)  # a resumed run rewrites the last one
+    cols = read_record(run / "records" / "sleeper_dem.csv")[0]
+    rows = []
+    for time, name in sorted(files.items()):
+        volume, centroid, low, high, mat = _stones(run / "sleeper" / name)
+        s = np.flatnonzero(mat == (mat.max() if sleeper_material is None else sleeper_material))[0]
+        stone = mat != mat[s]
+        over = stone & np.all((centroid[:, :2] >= low[s, :2]) & (centroid[:, :2] <= high[s, :2]), axis=1)
+        under = over & (centroid[:, 2] < low[s, 2])
+        area = np.prod(high[s, :2] - low[s, :2])
+        rows.append((time, float(np.interp(time, cols["time"], cols["cycle"])), low[s, 2], int(under.sum()), volume[under].sum(),
+                     volume[under].sum() / (area * low[s, 2]), int((over & (centroid[:, 2] > high[s, 2])).sum()),
+                     area))
+    return rows
+
+
 def main(argv):
     what, paths = argv[0], argv[1:]
     if what == "trend":
@@ -90,6 +155,18 @@ def main(argv):
             for name, (cycle, settlement) in curves(path).items():
                 a, b, rms, worst, fit, last, n = trend(cycle, settlement)
                 print(f"| {name} | {a:.2f} | {b:.3f} | {rms:.2f} | {worst:.2f} | {fit:.1f} / {last:.2f} (cycle {n}) |")
+        return
+    if what == "column":
+        for path in paths:
+            rows = column(path)
+            t0, c0, h0, n0, v0, phi0, top0, area = rows[0]
+            print(f"{Path(path).name}: footprint {area:.4f} m^2; against the first snapshot (cycle {c0:.2f})")
+            print("| cycle | base [mm] | stones under | solids under [cm^3] | solid fraction | stones on top | "
+                  "sunk [mm] | of which solids that left [mm] |")
+            print("|---|---|---|---|---|---|---|---|")
+            for t, c, h, n, v, phi, top, _ in rows:
+                print(f"| {c:.2f} | {h * 1e3:.1f} | {n} | {v * 1e6:.0f} | {phi:.4f} | {top} | "
+                      f"{(h0 - h) * 1e3:.1f} | {(v0 - v) / (phi * area) * 1e3:.1f} |")
         return
     print("| run | stage | cycles | swing [mm] | lowest at phase | kinetic energy at F_min, cycle 0 / median [J] | "
           "lowest coordination, median | height at F_min minus cycle mean, median [mm] |")

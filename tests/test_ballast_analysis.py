@@ -93,3 +93,58 @@ def test_response_recovers_swing_and_phase_of_a_known_motion(lowest):
         assert r[n - 1, 5] == z[np.isclose(cycle, n)][0]
     # (the cycle mean is the mean of the 4 samples: the drift puts it 0.375 x 0.1 mm above F_min's)
     np.testing.assert_allclose(r[:, 5] - r[:, 6], -0.015 * np.cos(2 * np.pi * lowest) - 0.375e-4, rtol=0, atol=1e-12)
+
+
+def _boxes(boxes):
+    """meshio Mesh of axis-aligned boxes [(lo, hi, material)], each as 12 outward triangles."""
+    import meshio
+
+    quads = [(0, 2, 3, 1), (4, 5, 7, 6), (0, 1, 5, 4), (2, 6, 7, 3), (0, 4, 6, 2), (1, 3, 7, 5)]
+    points, tris, body, material = [], [], [], []
+    for k, (lo, hi, mat) in enumerate(boxes):
+        corner = [[(lo, hi)[i & 1][0], (lo, hi)[i >> 1 & 1][1], (lo, hi)[i >> 2 & 1][2]] for i in range(8)]
+        base = 8 * k
+        points += corner
+        for a, b, c, d in quads:
+            tris += [(base + a, base + b, base + c), (base + a, base + c, base + d)]
+        body += [k] * 12
+        material += [mat] * 12
+    return meshio.Mesh(np.array(points, float), [("triangle", np.array(tris))],
+                       cell_data={"body": [np.array(body)], "material": [np.array(material)]})
+
+
+def test_column_counts_the_solids_under_the_sleeper_and_what_left(tmp_path):
+    # Given two sleeper snapshots of cubes (edge 0.05 m) and a 0.2 x 0.1 m sleeper (material 1):
+    # at t = 0.5 s two cubes under it, one beside it, one on its top; at t = 1.5 s the sleeper
+    # is 20 mm lower and one cube has moved out from under it. The dem record maps t = 0..2 s
+    # to cycles -1..1.
+    from demcli.state.vtu import PvdSeries
+
+    mod = load()
+    run = tmp_path / "run"
+    (run / "sleeper").mkdir(parents=True)
+    (run / "records").mkdir()
+    (run / "records" / "sleeper_dem.csv").write_text("time[s],cycle[1]\n0,-1\n1,0\n2,1\n")
+
+    def cube(x, z):
+        return (np.array([x - 0.025, 0.025, z - 0.025]), np.array([x + 0.025, 0.075, z + 0.025]), 0)
+
+    series = PvdSeries(run / "sleeper" / "polyhedra.pvd")
+    for k, (time, base, first_x) in enumerate([(0.5, 0.30, 0.3), (1.5, 0.28, 0.5)]):
+        sleeper = (np.array([0.2, 0.0, base]), np.array([0.4, 0.1, base + 0.1]), 1)
+        mesh = _boxes([cube(first_x, 0.1), cube(0.3, 0.2), cube(0.1, 0.1), cube(0.3, base + 0.15), sleeper])
+        path = run / "sleeper" / f"polyhedra_{k:06d}.vtu"
+        mesh.write(path)
+        series.add(time, path)
+    # When the column under the sleeper is measured
+    rows = mod.column(run)
+    # Then the cycles, base heights, counts, solid volumes and solid fractions are the exact ones
+    a3, area = 0.05 ** 3, 0.02
+    (t0, c0, h0, n0, v0, phi0, top0, area0), (t1, c1, h1, n1, v1, phi1, top1, area1) = rows
+    assert (c0, c1) == pytest.approx((-0.5, 0.5), abs=1e-12)
+    assert (h0, h1) == pytest.approx((0.30, 0.28), abs=1e-12)
+    assert (n0, n1, top0, top1) == (2, 1, 1, 1)
+    assert (v0, v1) == pytest.approx((2 * a3, a3), rel=1e-12)
+    assert area0 == pytest.approx(area, rel=1e-12) and area1 == pytest.approx(area, rel=1e-12)
+    assert phi0 == pytest.approx(2 * a3 / (area * 0.30), rel=1e-12)
+    assert phi1 == pytest.approx(a3 / (area * 0.28), rel=1e-12)

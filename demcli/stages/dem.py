@@ -798,7 +798,7 @@ def integrate(ctx, cfg, state_in, hooks=None):
     ckpt_t = _time.perf_counter()
     start_step = system.step
     t0 = _time.perf_counter()
-    progress = ctx.progress(total, start_step)
+    progress = ctx.progress(total, start_step, len(system.rad))
     chunk = min(rec_every, 200)
     stopped = None
     try:
