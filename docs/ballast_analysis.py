@@ -36,8 +36,8 @@ per snapshot, takes each stone's volume and centroid from its triangulated surfa
 (``demcli.geometry.polyhedron.mass_properties``) and counts the stones whose centroid lies in
 the column under the sleeper (inside its footprint in x and y, below its base). Per snapshot: the
 load cycle (from the time, by the dem record's time and cycle columns; negative while the
-sleeper settles under F_min), the sleeper's base height h [mm], the stones and the solid volume
-V_s under it, the column's solid fraction phi = V_s / (A h) for the footprint area A, and the
+sleeper settles under F_min), the sleeper's base height h [mm] above the box floor (z = 0), the
+stones and the solid volume V_s under it, the column's solid fraction phi = V_s / (A h) for the footprint area A, and the
 stones whose centroid is above the sleeper's top inside its footprint (shoulder stones that have
 spilled onto it). Against the first snapshot: how far the base has sunk, and how much of that
 the solids that left the column account for, (V_s,0 - V_s) / (phi A) [mm], the rest being
@@ -130,7 +130,7 @@ def column(run, sleeper_material=None):
 
     run = Path(run)
     sets = ET.parse(run / "sleeper" / "polyhedra.pvd").getroot().iter("DataSet")
-    files = dict((float(d.get("timestep")), d.get("file")) for d in sets)  # a resumed run rewrites the last one
+    files = dict((float(d.get("timestep")), d.get("file")) for d in sets)  # a time written twice counts once
     cols = read_record(run / "records" / "sleeper_dem.csv")[0]
     rows = []
     for time, name in sorted(files.items()):
@@ -140,9 +140,9 @@ def column(run, sleeper_material=None):
         over = stone & np.all((centroid[:, :2] >= low[s, :2]) & (centroid[:, :2] <= high[s, :2]), axis=1)
         under = over & (centroid[:, 2] < low[s, 2])
         area = np.prod(high[s, :2] - low[s, :2])
-        rows.append((time, float(np.interp(time, cols["time"], cols["cycle"])), low[s, 2], int(under.sum()), volume[under].sum(),
-                     volume[under].sum() / (area * low[s, 2]), int((over & (centroid[:, 2] > high[s, 2])).sum()),
-                     area))
+        solids = volume[under].sum()
+        rows.append((time, float(np.interp(time, cols["time"], cols["cycle"])), low[s, 2], int(under.sum()), solids,
+                     solids / (area * low[s, 2]), int((over & (centroid[:, 2] > high[s, 2])).sum()), area))
     return rows
 
 
