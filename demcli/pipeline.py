@@ -215,9 +215,52 @@ class Runner:
     def output_path(self, k):
         return self.run_dir / f"{k:02d}-{self.case.stages[k].name}.h5"
 
+    def _stopped(self, ctx, message):
+        """A StageError for a stage that stops, also in the log (a batch job's stderr may be lost)."""
+        exc = StageError(message)
+        self.log(f"[{ctx.name}] {exc.format_message()}")
+        return exc
+
+    def _run_stage(self, ctx, st_type, state_in, out_path):
+        """Run one stage and write its state; returns (state, StageResult).
+
+        Ctrl-C or SIGTERM while the stage runs stops it (a stepping stage keeps a checkpoint
+        for ``--resume``; others start again from their input); one that comes while its state
+        is written waits for the write, and the run stops right after it.
+        """
+        from demcli import interrupts
+        from demcli.state import set_rng, write_state
+
+        self.log(f"[{ctx.name}] {ctx.type} stage started")
+        t0 = _time.perf_counter()
+        try:
+            state = st_type.run(ctx, ctx.cfg, state_in)
+        except StageError as exc:
+            self.log(f"[{ctx.name}] {exc.format_message()}")
+            raise
+        except KeyboardInterrupt:
+            raise self._stopped(ctx, f"stage {ctx.name} interrupted; it keeps no checkpoint and starts again from "
+                                     "its input when the case is run again") from None
+        try:
+            with interrupts.deferred() as poll:
+                set_rng(state, ctx.rng)
+                self.finish_state(state)
+                write_state(out_path, state)
+                if ctx.checkpoint_path.exists():
+                    ctx.checkpoint_path.unlink()
+                wall = _time.perf_counter() - t0
+                self.log(f"[{ctx.name}] done in {wall:.2f} s"
+                         + (f", {ctx.throughput:.3g} particle-steps/s" if ctx.throughput else "")
+                         + f" -> {out_path.name}")
+                poll()
+        except KeyboardInterrupt:
+            raise self._stopped(ctx, f"interrupted after stage {ctx.name} finished ({out_path.name} written); run the "
+                                     "case again to go on with the next stages") from None
+        return state, StageResult(ctx.name, out_path, False, wall, ctx.throughput)
+
     def run(self, from_stage=None, only=None, force=False):
         from demcli.stages.base import STAGE_TYPES, load_stage_types
-        from demcli.state import read_meta, read_state, require, set_rng, state_hash, write_state
+        from demcli.state import read_meta, read_state, require, state_hash
         from demcli.state.order import spatial_order
 
         load_stage_types()
@@ -266,23 +309,8 @@ class Runner:
                 if moved:
                     self.log(f"[{cfg.name}] particles stored in cell order (neighbours close in memory)")
                 ctx = StageContext(self, k, cfg, chash, input_hash)
-                self.log(f"[{cfg.name}] {cfg.type} stage started")
-                t0 = _time.perf_counter()
-                try:
-                    state = st_type.run(ctx, cfg, state_in)
-                except StageError as exc:  # the log keeps why a stage stopped (a batch job's stderr may not)
-                    self.log(f"[{cfg.name}] {exc.format_message()}")
-                    raise
-                set_rng(state, ctx.rng)
-                self.finish_state(state)
-                write_state(out_path, state)
-                if ctx.checkpoint_path.exists():
-                    ctx.checkpoint_path.unlink()
-                wall = _time.perf_counter() - t0
-                self.log(f"[{cfg.name}] done in {wall:.2f} s"
-                         + (f", {ctx.throughput:.3g} particle-steps/s" if ctx.throughput else "")
-                         + f" -> {out_path.name}")
-                results.append(StageResult(cfg.name, out_path, False, wall, ctx.throughput))
+                state, result = self._run_stage(ctx, st_type, state_in, out_path)
+                results.append(result)
                 state_in, in_path = state, out_path
                 if only_k is not None:
                     break

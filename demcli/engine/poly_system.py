@@ -333,31 +333,46 @@ class PolySystem(BodySystem):
 
     # ---- set-up helpers -------------------------------------------------------------
     def _initial_lists(self, groups):
-        """Neighbour state seeded with the stored contacts (for history carry-over)."""
+        """Neighbour state seeded with the stored contacts: their history for carry-over, and
+        their forces, depths and touching flags, so that :meth:`groups` of a system not yet
+        stepped gives back the stored contacts (a stage resumed from a checkpoint of its last
+        step)."""
+        from demcli.kernels.poly_step import G_DEPTH
+
         nb = len(self.mass)
-        start, ci, cj, ft = self._stored_history(groups.get("body_contacts", {}), "i", "j", nb)
-        wstart, wb, ww, wft = self._stored_history(groups.get("body_wall_contacts", {}), "body", "wall", nb)
+        start, ci, cj, ft, fc, depth = self._stored_history(groups.get("body_contacts", {}), "i", "j", nb)
+        wstart, wb, ww, wft, wf, wdepth = self._stored_history(groups.get("body_wall_contacts", {}), "body", "wall",
+                                                               nb)
         npair = len(ci)
         nq = len(ww)
-        return (start, ci, cj, np.zeros(nb + 1, np.int64), _EMPTY_I, ft, np.zeros((npair, 3)),
-                np.zeros((npair, 3)), np.zeros(npair, np.uint8), _empty2(2), np.zeros((npair, 3)),
-                wstart, wb, ww, wft, np.zeros((nq, 4)), np.zeros((nq, 3)),
+        geo = np.zeros((npair, 3))
+        geo[:, G_DEPTH] = depth
+        wfc = np.zeros((nq, 4))
+        wfc[:, :3] = wf
+        wgeo = np.zeros((nq, 3))
+        wgeo[:, G_DEPTH] = wdepth
+        return (start, ci, cj, np.zeros(nb + 1, np.int64), _EMPTY_I, ft, fc,
+                np.zeros((npair, 3)), np.ones(npair, np.uint8), _empty2(2), geo,
+                wstart, wb, ww, wft, wfc, wgeo,
                 self.x.copy(), np.zeros((len(self.walls), 3)), np.zeros(npair, np.int32),
                 np.zeros((npair, 3)))
 
     def _stored_history(self, group, key_a, key_b, n):
+        """(CSR start, a, b, ft, force, depth) of stored contacts sorted by (a, b) (the kernels'
+        canonical order); ft only with friction. A state written before contacts kept their
+        depth seeds depth 0 (such a contact counts again once the resumed stage has stepped)."""
         a = np.asarray(group.get(key_a, _EMPTY_I), np.int64)
         b = np.asarray(group.get(key_b, _EMPTY_I), np.int64)
         order = np.lexsort((b, a))
         a, b = np.ascontiguousarray(a[order]), np.ascontiguousarray(b[order])
         start = np.searchsorted(a, np.arange(n + 1)).astype(np.int64)
-        if not self.plan.has("friction"):
-            ft = _empty2(3)
-        elif "ft" in group:
-            ft = np.ascontiguousarray(np.asarray(group["ft"], np.float64)[order])
-        else:
-            ft = np.zeros((len(a), 3))
-        return start, a, b, ft
+        rows = {}
+        for name, cols in (("ft", 3), ("force", 3), ("depth", 0)):
+            shape = (len(a), cols) if cols else (len(a),)
+            rows[name] = np.ascontiguousarray(np.asarray(group[name], np.float64)[order]) if name in group \
+                else np.zeros(shape)
+        ft = rows["ft"] if self.plan.has("friction") else _empty2(3)
+        return start, a, b, ft, rows["force"], rows["depth"]
 
     # ---- time stepping --------------------------------------------------------------
     @property
@@ -493,18 +508,19 @@ class PolySystem(BodySystem):
         i, ft with friction), wall_contacts (sphere = the body index, wall, force, ft),
         walls, energy, and adaptive_damping (alpha, ke_prev) when that effect is on.
         """
-        from demcli.kernels.poly_step import A_ALPHA, A_KE, P_ACT, P_FC, P_FT, P_PI, P_PJ, P_WBODY, P_WFC, \
-            P_WFT, P_WGEO, P_WWALL
+        from demcli.kernels.poly_step import A_ALPHA, A_KE, G_DEPTH, P_ACT, P_FC, P_FT, P_GEO, P_PI, P_PJ, P_WBODY, \
+            P_WFC, P_WFT, P_WGEO, P_WWALL
 
         nl = self.nl
         act = nl[P_ACT].astype(bool)
-        contacts = {"i": nl[P_PI][act].copy(), "j": nl[P_PJ][act].copy(), "force": nl[P_FC][act].copy()}
+        contacts = {"i": nl[P_PI][act].copy(), "j": nl[P_PJ][act].copy(), "force": nl[P_FC][act].copy(),
+                    "depth": nl[P_GEO][act, G_DEPTH].copy()}
         if self.plan.has("friction"):
             contacts["ft"] = nl[P_FT][act].copy()
         wgeo = nl[P_WGEO]
-        wact = wgeo[:, 0] > 0.0 if len(wgeo) else np.zeros(0, bool)
+        wact = wgeo[:, G_DEPTH] > 0.0 if len(wgeo) else np.zeros(0, bool)
         wall_contacts = {"body": nl[P_WBODY][wact].copy(), "wall": nl[P_WWALL][wact].copy(),
-                         "force": nl[P_WFC][wact, :3].copy()}
+                         "force": nl[P_WFC][wact, :3].copy(), "depth": wgeo[wact, G_DEPTH].copy()}
         if self.plan.has("friction"):
             wall_contacts["ft"] = nl[P_WFT][wact].copy()
         bodies = {"x": self.x.copy(), "v": self.v.copy(), "q": self.q.copy(), "omega": self.w.copy(),

@@ -290,23 +290,30 @@ class System(BodySystem):
         self.ws[:] = self.w[self.sbody]
 
     def _initial_lists(self, groups):
-        """Neighbour state seeded with the stored contacts (for history carry-over)."""
+        """Neighbour state seeded with the stored contacts: their history for carry-over, and
+        their forces and touching flags, so that :meth:`groups` of a system not yet stepped
+        gives back the stored contacts (a stage resumed from a checkpoint of its last step)."""
         ns = len(self.rad)
-        start, ci, cj, ft, mr = self._stored_history(groups.get("contacts", {}), "i", "j", ns)
-        wstart, ws_, ww, wft, wmr = self._stored_history(groups.get("wall_contacts", {}), "sphere", "wall", ns)
+        start, ci, cj, ft, mr, fc = self._stored_history(groups.get("contacts", {}), "i", "j", ns)
+        wstart, ws_, ww, wft, wmr, wf = self._stored_history(groups.get("wall_contacts", {}), "sphere", "wall", ns)
+        wfc = np.zeros((len(ww), 5))
+        wfc[:, :3] = wf
         return (start, ci, cj, np.zeros(ns + 1, np.int64), _EMPTY_I,
-                ft, mr, np.zeros((len(ci), 3)), _empty2(3), np.zeros(len(ci), np.uint8), _empty2(2),
-                wstart, ws_, ww, wft, wmr, np.zeros((len(ww), 5)),
+                ft, mr, fc, _empty2(3), np.ones(len(ci), np.uint8), _empty2(2),
+                wstart, ws_, ww, wft, wmr, wfc,
                 self.xs.copy(), np.zeros((len(self.walls), 3)))
 
     def _stored_history(self, group, key_a, key_b, ns):
-        """(CSR start, a, b, ft, mr) of stored contacts sorted by (a, b); history rows only for
-        the active effects."""
+        """(CSR start, a, b, ft, mr, force) of stored contacts sorted by (a, b) (the kernels'
+        canonical order); history rows only for the active effects."""
         a = np.asarray(group.get(key_a, _EMPTY_I), np.int64)
         b = np.asarray(group.get(key_b, _EMPTY_I), np.int64)
         order = np.lexsort((b, a))
         a, b = np.ascontiguousarray(a[order]), np.ascontiguousarray(b[order])
         start = np.searchsorted(a, np.arange(ns + 1)).astype(np.int64)
+        force = np.zeros((len(a), 3))
+        if "force" in group:
+            force[:] = np.asarray(group["force"], np.float64)[order]
         hist = []
         for name, flag in (("ft", K.F_FRICTION), ("mr", K.F_ROLLING)):
             if not self.flags[flag]:
@@ -315,7 +322,7 @@ class System(BodySystem):
                 hist.append(np.ascontiguousarray(group[name][order], np.float64))
             else:
                 hist.append(np.zeros((len(a), 3)))
-        return start, a, b, hist[0], hist[1]
+        return start, a, b, hist[0], hist[1], force
 
     # ---- time stepping --------------------------------------------------------------
     def critical_dt(self):

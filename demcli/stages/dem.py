@@ -32,6 +32,9 @@ for _name, _dims, _doc in [("losses0", (4,), "losses carried in from the input s
     register(Field(f"checkpoint/{_name}", "f", _dims, "J", _doc, writer="stage dem"))
 register(Field("checkpoint/wall_rate", "f", ("n_w",), "m/s", "rate of change of each pressure-loaded cylinder's "
                "radius", writer="stage dem", required=False))
+register(Field("checkpoint/ended", "str", (), "", "present when the stepping had ended (the stage was interrupted "
+               "while writing its outputs): why it ended, empty when all its steps were done",
+               writer="stage dem", required=False))
 
 MOTION = Tagged("mode", {
     "fixed": Section({}),
@@ -687,6 +690,7 @@ def integrate(ctx, cfg, state_in, hooks=None):
 
         system.wpoint[:] = groups["walls"]["point"]
         system.wv[:] = groups["walls"]["v"]
+        system.wforce[:] = groups["walls"]["force"]
         system.walls.radius[:] = groups["walls"]["radius"]
         if "wall_rate" in groups["checkpoint"]:
             system.walls.prm[:, W_RATE] = groups["checkpoint"]["wall_rate"]
@@ -735,9 +739,11 @@ def integrate(ctx, cfg, state_in, hooks=None):
                 wcols[f"{name}.position"] = "m"
                 wcols[f"{name}.force"] = "N"
             wtable = RecordTable("walls", wcols)
+    ended = None if ckpt is None else ckpt.groups["checkpoint"].get("ended")  # the loop had ended: why
+    ended = None if ended is None else str(ended)
     snaps = _Snapshots(ctx.snapshot_dir, plan.has("polyhedra"), resume=ckpt is not None)
-    if ckpt is not None:
-        snaps.truncate(system.time)
+    if ckpt is not None:  # a checkpoint of the loop's end writes the final snapshot again
+        snaps.truncate(system.time if ended is None else math.nextafter(system.time, -math.inf))
     nb = len(system.mass)
     d_mean = 2.0 * float(body_radii(system).mean())
     g = float(np.linalg.norm(system.gravity))
@@ -772,12 +778,15 @@ def integrate(ctx, cfg, state_in, hooks=None):
     def snapshot():
         snaps.write(ctx.state_from(system, plan, extra=None))
 
-    def checkpoint():
-        """Write the checkpoint of the current state, which must be right after a record."""
+    def checkpoint(ended=None):
+        """Write the checkpoint of the current state, which must be right after a record
+        (``ended``: why the stepping ended, "" for all steps done, when it has)."""
         extra = {"checkpoint": {
             "losses0": np.array([system.losses0[k] for k in ("damping", "friction", "body_damping", "wall_work")]),
             "esph": system.esph.copy(), "ebody": system.ebody.copy(), "eacc": system.eacc.copy(),
             "ke_limit": np.array([system.ke_limit])}}
+        if ended is not None:
+            extra["checkpoint"]["ended"] = ended
         if len(system.walls):
             from demcli.kernels.walls import W_RATE
 
@@ -800,10 +809,17 @@ def integrate(ctx, cfg, state_in, hooks=None):
     t0 = _time.perf_counter()
     progress = ctx.progress(total, start_step, len(system.rad))
     chunk = min(rec_every, 200)
-    stopped = None
+    stopped = ended or None
+
+    def stop_reason(row):
+        if cfg.stop is not None and system.time >= cfg.stop.min_time and \
+                row["kinetic"] / max(nb, 1) < cfg.stop.kinetic_ratio * e_unit:
+            return f"at rest (kinetic ratio < {cfg.stop.kinetic_ratio:g}) at t = {system.time:.4g} s"
+        return hooks.stop(system, row) if hooks.stop is not None else None
+
     try:
         with interrupts.deferred() as poll:  # Ctrl-C and SIGTERM act between chunks
-            while system.step < total:
+            while ended is None and system.step < total:
                 nxt = min(total, (system.step // rec_every + 1) * rec_every)
                 if snap_every:
                     nxt = min(nxt, (system.step // snap_every + 1) * snap_every)
@@ -818,17 +834,12 @@ def integrate(ctx, cfg, state_in, hooks=None):
                 if system.step % rec_every == 0 or system.step == total:
                     row = record()
                     last_good = system.snapshot()
+                    stopped = stop_reason(row)  # before a periodic checkpoint, which must not outlive a stop
+                    if stopped:
+                        break
                     if ckpt_every is not None and _time.perf_counter() - ckpt_t >= ckpt_every and system.step < total:
                         checkpoint()
                         ckpt_t = _time.perf_counter()
-                    if cfg.stop is not None and system.time >= cfg.stop.min_time and \
-                            row["kinetic"] / max(nb, 1) < cfg.stop.kinetic_ratio * e_unit:
-                        stopped = f"at rest (kinetic ratio < {cfg.stop.kinetic_ratio:g}) at t = {system.time:.4g} s"
-                        break
-                    if hooks.stop is not None:
-                        stopped = hooks.stop(system, row)
-                        if stopped:
-                            break
                 if snap_every and system.step % snap_every == 0 and system.step < total:
                     snapshot()
                 progress.update(system.step)
@@ -845,11 +856,23 @@ def integrate(ctx, cfg, state_in, hooks=None):
     steps_run = system.step - start_step
     nsph = len(system.rad)
     rate = nsph * steps_run / wall if wall > 0 else 0.0
-    if snap_every:
-        snapshot()
     ctx.log(f"{steps_run} steps in {wall:.2f} s: {rate:.3g} particle-steps/s"
             + (f"; stopped {stopped}" if stopped else ""))
     ctx.throughput = rate
+    try:
+        return _outputs(ctx, system, plan, table, wtable, hooks, snapshot if snap_every else None, energy)
+    except KeyboardInterrupt:
+        with interrupts.deferred(keep=False):
+            path = checkpoint(ended=stopped or "")
+        raise StageError(f"stage {ctx.name} interrupted while writing its outputs (its {system.step} steps are done); "
+                         "continue with --resume", state_file=path) from None
+
+
+def _outputs(ctx, system, plan, table, wtable, hooks, snapshot, energy):
+    """The stage's outputs once its stepping has ended: the final snapshot, the state, the
+    record files and the stage's own (``hooks.finish``)."""
+    if snapshot is not None:
+        snapshot()
     st = ctx.state_from(system, plan, extra=None)
     table.to_state(st)
     ctx.write_records(table, x="time", ys=["kinetic"], logy=True)

@@ -69,7 +69,8 @@ for _name, _kind, _dims, _unit, _doc, _kw in [
         ("i", "i", ("n_bc",), "", "first body (i < j)", {"index_of": "n_b"}),
         ("j", "i", ("n_bc",), "", "second body", {"index_of": "n_b"}),
         ("ft", "f", ("n_bc", 3), "N", "tangential spring force (history)", {"required": False}),
-        ("force", "f", ("n_bc", 3), "N", "last contact force on body i", {})]:
+        ("force", "f", ("n_bc", 3), "N", "last contact force on body i", {}),
+        ("depth", "f", ("n_bc",), "m", "overlap depth d = V / A_c of the last evaluation", {"required": False})]:
     register(Field(f"body_contacts/{_name}", _kind, _dims, _unit, _doc, writer="engine (polyhedra)", **_kw))
 
 register_group("body_wall_contacts", "Persistent polyhedron-wall contacts with their history",
@@ -78,7 +79,8 @@ for _name, _kind, _dims, _unit, _doc, _kw in [
         ("body", "i", ("n_bwc",), "", "body index", {"index_of": "n_b"}),
         ("wall", "i", ("n_bwc",), "", "wall index", {"index_of": "n_w"}),
         ("ft", "f", ("n_bwc", 3), "N", "tangential spring force (history)", {"required": False}),
-        ("force", "f", ("n_bwc", 3), "N", "last contact force on the body", {})]:
+        ("force", "f", ("n_bwc", 3), "N", "last contact force on the body", {}),
+        ("depth", "f", ("n_bwc",), "m", "overlap depth d = V / A_c of the last evaluation", {"required": False})]:
     register(Field(f"body_wall_contacts/{_name}", _kind, _dims, _unit, _doc, writer="engine (polyhedra)", **_kw))
 
 register_group("adaptive_damping", "State of the adaptive mass-proportional damping (seed 002, eqs. 23-27)",

@@ -185,9 +185,11 @@ class PvdSeries:
         self.write()
 
     def truncate(self, after_time: float) -> None:
-        """Drop entries later than ``after_time`` (resuming from an earlier checkpoint)."""
+        """Drop entries later than ``after_time`` (resuming from an earlier checkpoint); a series
+        never written stays unwritten."""
         self.entries = [e for e in self.entries if e[0] <= after_time]
-        self.write()
+        if self.path.exists():
+            self.write()
 
     def to_xml(self) -> str:
         root = ET.Element("VTKFile", type="Collection", version="0.1", byte_order="LittleEndian")
