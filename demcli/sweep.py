@@ -380,6 +380,13 @@ main(sys.argv[1:])
 """
 
 
+def child_command(argv):
+    """The command line of a run's child process: ``demcli ARGV`` in this Python, with ``-P``
+    so that the current folder does not come first on the import path (run from the folder
+    that holds a checkout named ``demcli``, ``import demcli`` would find that folder)."""
+    return [sys.executable, "-P", "-c", _CHILD, *argv]
+
+
 def _error_line(output, returncode):
     """The first line of the run's error: demcli's ``Error: ...`` (with its detail line when
     the first one ends in a colon), else the last line of a traceback, else how it ended."""
@@ -422,7 +429,7 @@ def _run_one(job):
         with open(log_path, "w", encoding="utf-8") as out:
             out.write(head)
             out.flush()
-            code = subprocess.call([sys.executable, "-c", _CHILD, *argv], stdout=out, stderr=subprocess.STDOUT,
+            code = subprocess.call(child_command(argv), stdout=out, stderr=subprocess.STDOUT,
                                    stdin=subprocess.DEVNULL, env=env)
         reply["wall_time"] = time.perf_counter() - t0
         output = log_path.read_text(encoding="utf-8", errors="replace")[len(head):]

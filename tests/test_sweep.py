@@ -298,3 +298,16 @@ runs:
                                                   for f in folders):
         time.sleep(0.1)
     assert all("interrupted at step" in (f / "log.txt").read_text() for f in folders)
+
+
+def test_a_run_started_from_the_folder_holding_the_checkout_imports_the_installed_demcli(tmp_path, monkeypatch):
+    """#27 item 13: the folder that holds a checkout named ``demcli`` shadowed the package in
+    the runs' child processes (``cannot import name '__version__' from 'demcli'``)."""
+    from demcli.sweep import _CHILD, child_command
+
+    (tmp_path / "demcli" / "cases").mkdir(parents=True)  # a checkout's top folder: no __init__.py
+    monkeypatch.chdir(tmp_path)
+    plain = subprocess.run([sys.executable, "-c", _CHILD, "--version"], capture_output=True, text=True)
+    assert plain.returncode != 0 and "__version__" in plain.stderr  # the trap is real here
+    proc = subprocess.run(child_command(["--version"]), capture_output=True, text=True)
+    assert proc.returncode == 0 and "demcli, version" in proc.stdout, proc.stderr
