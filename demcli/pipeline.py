@@ -13,7 +13,10 @@ A stage is skipped when its state exists and records the same stage config hash 
 the same input-state hash (so editing one stage re-runs it and everything after it).
 """
 
+import contextlib
 import difflib
+import errno
+import os
 import sys
 import time as _time
 from dataclasses import dataclass
@@ -21,7 +24,16 @@ from pathlib import Path
 
 import numpy as np
 
-from demcli.errors import InputError, StageError
+from demcli.errors import InputError, StageError, WriteError
+from demcli.progress import Progress
+
+
+def _read_only(folder):
+    """Whether ``folder`` lies on a file system mounted read-only."""
+    try:
+        return bool(os.statvfs(folder).f_flag & os.ST_RDONLY)
+    except OSError:
+        return False
 
 
 @dataclass
@@ -31,46 +43,6 @@ class StageResult:
     skipped: bool
     wall_time: float
     throughput: float = 0.0
-
-
-class Progress:
-    """Progress with rate and ETA on stderr: a live line on a terminal, else a line every 10 %
-    and at least every ``LOG_EVERY`` seconds (a batch job's log of a long stage)."""
-
-    LOG_EVERY = 60.0
-
-    def __init__(self, label, total, start, quiet, nparticles):
-        self.label, self.total, self.start, self.quiet, self.np = label, total, start, quiet, nparticles
-        self.t0 = _time.perf_counter()
-        self.tty = sys.stderr.isatty()
-        self.last_print = self.t0
-        self.next_pct = 10
-
-    def update(self, step):
-        if self.quiet or self.total <= 0:
-            return
-        now = _time.perf_counter()
-        done = step - self.start
-        frac = step / self.total
-        rate = done / max(now - self.t0, 1e-9)
-        eta = (self.total - step) / rate if rate > 0 else float("inf")
-        text = (f"  {self.label}: {100 * frac:5.1f} %  step {step}/{self.total}  "
-                f"{rate * self.np:.3g} particle-steps/s  ETA {eta:.0f} s")
-        if self.tty:
-            if now - self.last_print > 0.2:
-                sys.stderr.write("\r" + text)
-                sys.stderr.flush()
-                self.last_print = now
-        elif 100 * frac >= self.next_pct or now - self.last_print >= self.LOG_EVERY:
-            sys.stderr.write(text + "\n")
-            sys.stderr.flush()
-            self.last_print = now
-            self.next_pct = (int(100 * frac) // 10 + 1) * 10
-
-    def close(self):
-        if self.tty and not self.quiet:
-            sys.stderr.write("\r" + " " * 100 + "\r")
-            sys.stderr.flush()
 
 
 class StageContext:
@@ -187,8 +159,34 @@ class Runner:
         if not self.quiet:
             print(line, file=sys.stderr, flush=True)
         if self._logfile is not None:
-            self._logfile.write(line + "\n")
-            self._logfile.flush()
+            try:
+                self._logfile.write(line + "\n")
+                self._logfile.flush()
+            except OSError as exc:
+                self._close_log()  # nothing more goes to a file that cannot be written
+                if not WriteError.is_disk_error(exc):
+                    raise
+                raise WriteError(self.run_dir / "log.txt", exc) from None
+
+    def _open_log(self):
+        """The run folder and its log.txt, opened for appending (WriteError when it cannot be)."""
+        path = self.run_dir / "log.txt"
+        try:
+            self.run_dir.mkdir(parents=True, exist_ok=True)
+            if not os.access(self.run_dir, os.W_OK):  # also a read-only mount, for root
+                code = errno.EROFS if _read_only(self.run_dir) else errno.EACCES
+                raise OSError(code, os.strerror(code))
+            self._logfile = open(path, "a", encoding="utf-8")
+        except OSError as exc:
+            if not WriteError.is_disk_error(exc):
+                raise
+            raise WriteError(path, exc) from None
+
+    def _close_log(self):
+        logfile, self._logfile = self._logfile, None
+        if logfile is not None:
+            with contextlib.suppress(OSError):  # its last lines may not fit on a full disk
+                logfile.close()
 
     def stage_index(self, name, option):
         names = [s.name for s in self.case.stages]
@@ -267,8 +265,7 @@ class Runner:
         stages = self.case.stages
         first = self.stage_index(from_stage, "--from") if from_stage else 0
         only_k = self.stage_index(only, "--only") if only else None
-        self.run_dir.mkdir(parents=True, exist_ok=True)
-        self._logfile = open(self.run_dir / "log.txt", "a", encoding="utf-8")
+        self._open_log()
         results = []
         try:
             self.log(f"case {self.case_path} -> {self.run_dir} ({self.threads} thread{'s' if self.threads > 1 else ''})")
@@ -315,8 +312,7 @@ class Runner:
                 if only_k is not None:
                     break
         finally:
-            self._logfile.close()
-            self._logfile = None
+            self._close_log()
         return results
 
 

@@ -442,6 +442,13 @@ class PolySystem(BodySystem):
             return math.inf
         return 2.0 / math.sqrt(float(w2[mobile].max()))
 
+    @staticmethod
+    def step_kernel():
+        """The compiled step loop :meth:`advance` calls (numba dispatcher)."""
+        from demcli.kernels.poly_step import run_poly_steps
+
+        return run_poly_steps
+
     def advance(self, nsteps):
         """Run ``nsteps`` steps in compiled code; returns (status, steps done)."""
         from demcli.kernels.poly_step import A_MAX, run_poly_steps

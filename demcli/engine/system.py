@@ -337,6 +337,13 @@ class System(BodySystem):
         w2 = self.bonds.critical_omega2(float(self.smass.min()), float(self.inert.min()), float(self.rad.min()))
         return 2.0 / math.sqrt((2.0 / dt) ** 2 + w2) if w2 > 0 else dt
 
+    @staticmethod
+    def step_kernel():
+        """The compiled step loop :meth:`advance` calls (numba dispatcher)."""
+        from demcli.kernels.step import run_steps
+
+        return run_steps
+
     def advance(self, nsteps):
         """Run ``nsteps`` steps in compiled code; returns (status, steps done)."""
         from demcli.kernels.step import run_steps

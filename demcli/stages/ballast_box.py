@@ -248,7 +248,7 @@ def cycle_timing(load, cycles, records_per_cycle, dt):
     return dt, settle + cycles * spc, spc // rec
 
 
-def _cyclic(ctx, cfg, state_in, actor, measure, columns, stop=None, finish_extra=None):
+def _cyclic(ctx, cfg, state_in, actor, measure, columns, stop=None, finish_extra=None, target=None):
     """Run a cyclic stage on the dem loop: ``measure(system) -> dict`` of ``columns`` at each
     record, plus ``cycle``; the rows at whole cycles go to the ``cycles`` record."""
     from demcli.engine.actors import actor_index
@@ -311,7 +311,11 @@ def _cyclic(ctx, cfg, state_in, actor, measure, columns, stop=None, finish_extra
     b = actor_index(state_in.groups, actor)
     if b is None:
         raise InputError(f"stage {ctx.name}: the scene has no {actor}")
-    hooks = dem.Hooks(columns={"cycle": "1", **columns}, row=row, stop=stop_hook, finish=finish, timing=timing)
+    def watch(r):  # what `stop` tests, at the cycle ends where it tests it (the ETA follows its trend)
+        return r[target[0]] if is_cycle_end(r) and round(r["cycle"]) >= 1 else None
+
+    hooks = dem.Hooks(columns={"cycle": "1", **columns}, row=row, stop=stop_hook, finish=finish, timing=timing,
+                      watch=watch if target is not None else None, target=target and target[1:])
     dcfg = dict(cfg)
     dcfg["time"] = Node({"steps": 1, "duration": None, "dt": cfg.time.dt, "dt_factor": cfg.time.dt_factor})
     dcfg["stop"] = None
@@ -383,7 +387,8 @@ def run_vibrate(ctx, cfg, state_in):
 
     return _cyclic(ctx, cfg, _state_with(ctx, state_in, groups), "plate", measure,
                    {"plate": "m", "bulk_density": "kg/m^3", "porosity": "1", "void_ratio": "1"}, stop=stop,
-                   finish_extra=finish)
+                   finish_extra=finish,
+                   target=("bulk_density", cfg.target_density, True) if cfg.target_density is not None else None)
 
 
 def _top(groups):

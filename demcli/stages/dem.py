@@ -19,7 +19,9 @@ import numpy as np
 from demcli import interrupts
 from demcli.config.schema import Bool, Float, Int, List, Map, Optional, Section, Str, Tagged, Vector
 from demcli.errors import InputError, StageError, StateError
+from demcli.progress import StopForecast, compile_notice
 from demcli.stages.base import StageType, register_stage
+from demcli.threads import ThreadGovernor
 from demcli.state.fields import Field, register, register_group
 
 register_group("checkpoint", "Engine accumulators of an interrupted dem stage (only in .ckpt.h5 files)",
@@ -649,6 +651,9 @@ class Hooks:
         columns: extra record columns {name: unit} of the ``dem`` table.
         row: ``row(system) -> dict`` values of those columns at each record.
         stop: ``stop(system, row) -> str | None``: a reason to end the stage at a record.
+        watch: ``watch(row) -> float | None``: the value ``stop`` tests (None at records
+            where it tests nothing), and target: its ``(threshold, rising)``; the progress
+            line's ETA follows their trend (:class:`demcli.progress.StopForecast`).
         finish: ``finish(ctx, system, state, table)`` after the loop (extra outputs).
         timing: ``timing(system, dt, dt_crit) -> (dt, total_steps, record_every)``
             replaces the time step, the stage length and the record interval of the
@@ -663,6 +668,8 @@ class Hooks:
     columns: dict = field(default_factory=dict)
     row: object = None
     stop: object = None
+    watch: object = None
+    target: object = None
     finish: object = None
     timing: object = None
     start: object = None
@@ -797,8 +804,18 @@ def integrate(ctx, cfg, state_in, hooks=None):
             wtable.to_state(st)
         return ctx.write_checkpoint(st)
 
+    compiling = [compile_notice(system.step_kernel()), _time.perf_counter()]
+    if compiling[0]:
+        ctx.log(compiling[0])
+
+    def compiled():
+        if compiling[0]:
+            ctx.log(f"kernels ready after {_time.perf_counter() - compiling[1]:.0f} s")
+            compiling[0] = None
+
     if ckpt is None:
         system.advance(0)  # loads at x_0 before the first record: a checkpoint at step 0 holds them too
+        compiled()
         record()
         if snap_every:
             snapshot()
@@ -808,6 +825,8 @@ def integrate(ctx, cfg, state_in, hooks=None):
     start_step = system.step
     t0 = _time.perf_counter()
     progress = ctx.progress(total, start_step, len(system.rad))
+    forecast = _stop_forecast(cfg, hooks, dt, e_unit, nb)
+    governor = ThreadGovernor(ctx.runner.threads, ctx.log)
     chunk = min(rec_every, 200)
     stopped = ended or None
 
@@ -824,9 +843,12 @@ def integrate(ctx, cfg, state_in, hooks=None):
                 if snap_every:
                     nxt = min(nxt, (system.step // snap_every + 1) * snap_every)
                 n = min(chunk, nxt - system.step)
+                governor.threads()
                 c0 = _time.perf_counter()
                 status, done = system.advance(n)
                 elapsed = _time.perf_counter() - c0
+                governor.chunk_done(done, elapsed)
+                compiled()
                 if status != K.OK:
                     ctx.fail(_diagnosis(ctx, system, status, dt, dt_crit, cfg), system, plan, last_good)
                 # chunks of about 0.5 s keep Ctrl-C and progress responsive; physics does not depend on them
@@ -834,6 +856,8 @@ def integrate(ctx, cfg, state_in, hooks=None):
                 if system.step % rec_every == 0 or system.step == total:
                     row = record()
                     last_good = system.snapshot()
+                    if forecast is not None:
+                        forecast[0].add(system.step, forecast[1](row))
                     stopped = stop_reason(row)  # before a periodic checkpoint, which must not outlive a stop
                     if stopped:
                         break
@@ -842,7 +866,7 @@ def integrate(ctx, cfg, state_in, hooks=None):
                         ckpt_t = _time.perf_counter()
                 if snap_every and system.step % snap_every == 0 and system.step < total:
                     snapshot()
-                progress.update(system.step)
+                progress.update(system.step, forecast[0].end() if forecast is not None else None)
                 poll()
     except KeyboardInterrupt:
         with interrupts.deferred(keep=False):  # a second Ctrl-C or SIGTERM does not cut the write short
@@ -851,6 +875,8 @@ def integrate(ctx, cfg, state_in, hooks=None):
         progress.close()
         raise StageError(f"stage {ctx.name} interrupted at step {system.step}; continue with --resume",
                          state_file=path) from None
+    finally:
+        governor.close()
     progress.close()
     wall = _time.perf_counter() - t0
     steps_run = system.step - start_step
@@ -866,6 +892,19 @@ def integrate(ctx, cfg, state_in, hooks=None):
             path = checkpoint(ended=stopped or "")
         raise StageError(f"stage {ctx.name} interrupted while writing its outputs (its {system.step} steps are done); "
                          "continue with --resume", state_file=path) from None
+
+
+def _stop_forecast(cfg, hooks, dt, e_unit, nb):
+    """(StopForecast, value of a record row) of the criterion that may end the stage early:
+    the kinetic energy per body (``nb`` bodies) against ``stop.kinetic_ratio`` x m g d, or a stage's own
+    ``hooks.watch``/``hooks.target``; None without either."""
+    if cfg.stop is not None:
+        earliest = int(math.ceil(cfg.stop.min_time / dt))
+        return (StopForecast(cfg.stop.kinetic_ratio * e_unit, rising=False, log=True, earliest=earliest),
+                lambda row: row["kinetic"] / max(nb, 1))
+    if hooks.watch is not None and hooks.target is not None:
+        return StopForecast(hooks.target[0], rising=hooks.target[1]), hooks.watch
+    return None
 
 
 def _outputs(ctx, system, plan, table, wtable, hooks, snapshot, energy):

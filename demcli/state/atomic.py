@@ -12,6 +12,8 @@ import contextlib
 import os
 from pathlib import Path
 
+from demcli.errors import WriteError
+
 
 def temp_path_for(path) -> Path:
     """The temp name used while ``path`` is being written."""
@@ -41,25 +43,29 @@ def atomic_path(path):
     """Yield a temp path to write; on normal exit it replaces ``path`` atomically.
 
     The parent folder is created if needed. If the body raises, the temp file is
-    removed, ``path`` is left untouched, and the exception propagates::
+    removed, ``path`` is left untouched, and the exception propagates; an OSError of the
+    disk (full, read-only, forbidden) comes out as :class:`~demcli.errors.WriteError`
+    naming ``path``::
 
         with atomic_path("out/state.h5") as tmp:
             write_something(tmp)
     """
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
     tmp = temp_path_for(path)
     try:
+        path.parent.mkdir(parents=True, exist_ok=True)
         yield tmp
         if not tmp.exists():
             raise FileNotFoundError(f"atomic write of {path}: the writer created no file at {tmp}")
         _fsync_path(tmp)
         os.replace(tmp, path)
-    except BaseException:
+        _fsync_path(path.parent, directory=True)
+    except BaseException as exc:
         with contextlib.suppress(OSError):
             tmp.unlink()
+        if WriteError.is_disk_error(exc):
+            raise WriteError(path, exc) from None
         raise
-    _fsync_path(path.parent, directory=True)
 
 
 def atomic_write_bytes(path, data: bytes) -> None:

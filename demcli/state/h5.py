@@ -12,6 +12,7 @@ Writes are atomic (:mod:`demcli.state.atomic`).
 from __future__ import annotations
 
 import hashlib
+import io
 import json
 from pathlib import Path
 
@@ -20,7 +21,7 @@ import numpy as np
 
 from demcli.errors import StateError
 from demcli.state import fields as _f
-from demcli.state.atomic import atomic_path
+from demcli.state.atomic import atomic_write_bytes
 from demcli.state.fields import FIELDS, GROUPS, SCHEMA_VERSION, State
 
 PHYSICS_META = ("dim", "dt", "effects", "schema_version", "seed", "step", "time")
@@ -127,33 +128,37 @@ def write_state(path, state: State, *, validate: bool = True) -> Path:
     """Validate ``state`` and write it to ``path`` atomically; returns the path.
 
     The same State always gives the same bytes (no timestamps, sorted order).
-    Raises :class:`StateError` for an invalid state (nothing is written then).
+    Raises :class:`StateError` for an invalid state (nothing is written then). The file is
+    built in memory and written in one piece: the HDF5 library never meets a full or
+    read-only disk (where it crashes the process), plain file I/O does and raises
+    :class:`~demcli.errors.WriteError`.
     """
     path = Path(path)
     if validate:
         _f.validate(state, source=f"{path} (not written)")
-    with atomic_path(path) as tmp:
-        with h5py.File(tmp, "w", libver="earliest") as f:
-            meta = f.create_group("meta")
-            for key in sorted(state.meta):
-                meta.attrs[key] = _attr_value(f"meta/{key}", state.meta[key])
-            for gname in sorted(set(state.groups) | set(state.group_attrs)):
-                if gname == "meta":
-                    raise StateError(f"{path}: 'meta' is reserved for State.meta")
-                grp = f.require_group(gname)
-                data = state.groups.get(gname, {})
-                for name in sorted(data):
-                    arr = _disk_array(f"{gname}/{name}", data[name])
-                    deflate = arr.dtype.kind in "biuf" and arr.nbytes >= COMPRESS_MIN_BYTES
-                    ds = grp.create_dataset(name, data=arr, track_times=False,
-                                            **({"compression": "gzip", "compression_opts": 1, "shuffle": True}
-                                               if deflate else {}))
-                    unit = _dataset_unit(gname, name, state)
-                    if unit:
-                        ds.attrs["unit"] = unit
-                attrs = state.group_attrs.get(gname, {})
-                for key in sorted(attrs):
-                    grp.attrs[key] = _attr_value(f"{gname}@{key}", attrs[key])
+    buf = io.BytesIO()
+    with h5py.File(buf, "w", libver="earliest") as f:
+        meta = f.create_group("meta")
+        for key in sorted(state.meta):
+            meta.attrs[key] = _attr_value(f"meta/{key}", state.meta[key])
+        for gname in sorted(set(state.groups) | set(state.group_attrs)):
+            if gname == "meta":
+                raise StateError(f"{path}: 'meta' is reserved for State.meta")
+            grp = f.require_group(gname)
+            data = state.groups.get(gname, {})
+            for name in sorted(data):
+                arr = _disk_array(f"{gname}/{name}", data[name])
+                deflate = arr.dtype.kind in "biuf" and arr.nbytes >= COMPRESS_MIN_BYTES
+                ds = grp.create_dataset(name, data=arr, track_times=False,
+                                        **({"compression": "gzip", "compression_opts": 1, "shuffle": True}
+                                           if deflate else {}))
+                unit = _dataset_unit(gname, name, state)
+                if unit:
+                    ds.attrs["unit"] = unit
+            attrs = state.group_attrs.get(gname, {})
+            for key in sorted(attrs):
+                grp.attrs[key] = _attr_value(f"{gname}@{key}", attrs[key])
+    atomic_write_bytes(path, buf.getvalue())
     return path
 
 
