@@ -6,6 +6,11 @@ import click
 
 from demcli import __version__
 
+SET_HELP = ("Override a case value (the value is read as YAML). PATH is dotted keys; a list item goes by its "
+            "index or its name, with or without brackets: stages.settle.walls[1].max or stages.settle.walls.1.max, "
+            "and stages.settle.walls.lid.max or stages.settle.walls[lid].max for the wall named lid. "
+            "E.g. --set stages.settle.time.duration=0.1s")
+
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(__version__, prog_name="demcli")
@@ -18,8 +23,7 @@ def cli():
 @click.option("--from", "from_stage", metavar="STAGE", help="Re-run from this stage on.")
 @click.option("--only", metavar="STAGE", help="Run only this stage (its input must exist).")
 @click.option("--force", is_flag=True, help="Re-run stages even when up to date.")
-@click.option("--set", "overrides", multiple=True, metavar="PATH=VALUE",
-              help="Override a case value, e.g. --set stages.settle.time.duration=0.1s")
+@click.option("--set", "overrides", multiple=True, metavar="PATH=VALUE", help=SET_HELP)
 @click.option("--out", type=click.Path(file_okay=False), help="Run folder (default runs/<case name>).")
 @click.option("--threads", type=click.IntRange(min=1), help="Threads for the kernels (default: the cores not busy with other work).")
 @click.option("--quiet", is_flag=True, help="No progress or log lines.")
@@ -39,7 +43,7 @@ def run(case, from_stage, only, force, overrides, out, threads, quiet, resume):
 
 @cli.command()
 @click.argument("case", type=click.Path(dir_okay=False))
-@click.option("--set", "overrides", multiple=True, metavar="PATH=VALUE", help="Override a case value.")
+@click.option("--set", "overrides", multiple=True, metavar="PATH=VALUE", help=SET_HELP)
 def check(case, overrides):
     """Validate CASE and print its plan (compiles nothing)."""
     from demcli.check import describe_case
@@ -63,7 +67,8 @@ def info(state):
 @click.option("--record", help="Record file stem, e.g. vibrate_cycles (default: the seeds' figures that all "
                                 "runs have).")
 @click.option("-x", "x", help="Column along x (default: the first).")
-@click.option("-y", "ys", multiple=True, help="Column(s) to plot (default: all others).")
+@click.option("-y", "ys", multiple=True, help="Column(s) to plot: a comma list (-y a,b) or -y again "
+                                             "(default: all others).")
 @click.option("--out", default="compare", show_default=True, type=click.Path(file_okay=False),
               help="Folder for the PNG and CSV files.")
 @click.option("--with", "earlier", multiple=True, type=click.Path(dir_okay=False, exists=True),

@@ -70,12 +70,14 @@ def read_long(path):
 def compare(runs, record=None, x=None, ys=None, out="compare", earlier=()):
     """Overlay ``record`` (a file stem such as ``vibrate_cycles``) of every run folder.
 
-    Without ``record``: every record of :data:`SEED_FIGURES` that all runs have.
+    Without ``record``: every record of :data:`SEED_FIGURES` that all runs have. ``ys``: the y
+    columns, each item a name or a comma list (``["a,b", "c"]``); none: all but x.
     ``earlier``: long CSVs of a previous comparison; each joins the figure with its x and y
     columns, its curves drawn first (a name that a run folder or an earlier file also has gets
     the file's name appended). Returns the written paths.
     """
     runs = [Path(r) for r in runs]
+    ys = [c.strip() for y in ys or () for c in y.split(",") if c.strip()]
     earlier = [(Path(p), *read_long(p)) for p in earlier]
     for r in runs:
         if not (r / "records").is_dir():

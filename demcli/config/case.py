@@ -1,14 +1,22 @@
 """The case file schema: top-level keys, materials, and the list of stages.
 
 Stage sections come from the stage registry (:mod:`demcli.stages.base`); this module
-adds the keys every case has and the cross-references between them (a stage naming a
-material that does not exist is an error at validation, before anything runs).
+adds the keys every case has and the rules across them, so that a case that ``check``
+passes does not fail later for a reason known before it runs:
+
+* references (checked on the raw case, so they are reported together with every other
+  problem): each ``material``, ``*_material`` and ``materials`` list names a material of
+  the case; each stage's input holds what its type ``requires``, written by an earlier
+  stage (see :func:`demcli.stages.base.input_scenes`), and the first stage needs no input;
+* on the validated case: what a stage's config reads besides (``config_requires``), and
+  each stage type's ``case_check`` (dimension, the classes of the gradation, memory).
 """
 
+from collections.abc import Mapping
 from functools import lru_cache
 
 from demcli.config.load import load_case as _load_case
-from demcli.config.schema import Float, Int, List, Map, Section, Str, Tagged
+from demcli.config.schema import NOVALUE, Float, Int, List, Map, Section, Str, Tagged, did_you_mean, split_subpath
 
 MATERIAL = Section({
     "density": Float("kg/m^3", min=0, min_inclusive=False, doc="particle density"),
@@ -22,28 +30,105 @@ MATERIAL = Section({
 
 NAME = r"^[A-Za-z][A-Za-z0-9_\-]*$"
 
+SEED_MAX = 2 ** 63 - 1
+"""Largest seed: states store seeds as 64-bit signed integers."""
 
-def _material_refs(node, report):
-    """Every ``material`` key anywhere in a stage must name a defined material."""
-    names = set(node.materials)
+
+def seed_field(doc, default=0):
+    """An Int field for a random seed: 0 to :data:`SEED_MAX`."""
+    return Int(min=0, max=SEED_MAX, default=default, doc=doc)
+
+
+def _is_material_key(key):
+    return isinstance(key, str) and (key == "material" or key.endswith("_material"))
+
+
+def _material_refs(stages, names, report):
+    """Every ``material``/``*_material`` string and ``materials`` list of strings in the raw
+    stages must name a material of the case."""
+    def check(name, path):
+        if isinstance(name, str) and name not in names:
+            hint = did_you_mean(name, names) or f"materials: {', '.join(map(str, names)) or 'none'}"
+            report(path, f"unknown material {name!r}", hint=hint)
 
     def walk(value, path):
-        if hasattr(value, "keys"):
-            for k in value.keys():
-                v = value[k]
-                if k == "material" and isinstance(v, str) and v not in names:
-                    from difflib import get_close_matches
-
-                    close = get_close_matches(v, sorted(names), n=1)
-                    report(path + (k,), "unknown material", v, hint=close[0] if close else None)
+        if isinstance(value, Mapping):
+            for key, item in value.items():
+                if _is_material_key(key):
+                    check(item, path + (key,))
+                elif key == "materials" and isinstance(item, list):
+                    for i, name in enumerate(item):
+                        check(name, path + (key, i))
                 else:
-                    walk(v, path + (k,))
-        elif isinstance(value, tuple):
-            for i, v in enumerate(value):
-                walk(v, path + (i,))
+                    walk(item, path + (key,))
+        elif isinstance(value, list):
+            for i, item in enumerate(value):
+                walk(item, path + (i,))
 
-    for i, st in enumerate(node.stages):
-        walk(st, ("stages", i))
+    walk(stages, ("stages",))
+
+
+def _stage_inputs(stages, report):
+    """Each raw stage's input must hold what its type requires: the first stage takes none."""
+    from demcli.stages.base import STAGE_TYPES, has_field, input_scenes, type_of
+
+    for k, (cfg, scene) in enumerate(zip(stages, input_scenes(stages))):
+        st = type_of(cfg)
+        if st is None or not st.needs_input:
+            continue
+        if k == 0:
+            starts = ", ".join(n for n, t in sorted(STAGE_TYPES.items()) if not t.needs_input)
+            report(("stages", 0, "type"), f"stage type {st.name} reads the state of an earlier stage, but this is "
+                   "the first stage", hint=f"start with a stage that makes a scene ({starts})")
+            continue
+        missing = [p for p in st.requires if scene is not None and not has_field(scene, p)]
+        if missing:
+            before = stages[k - 1]
+            report(("stages", k, "type"), f"stage type {st.name} needs {', '.join(missing)} in its input, which no "
+                   f"earlier stage writes (the input is the output of stage {before.get('name')!r}, type "
+                   f"{before.get('type')})",
+                   hint=_writers_hint(missing))
+
+
+def _writers_hint(missing):
+    """Which stage types write the fields ``missing``."""
+    from demcli.stages.base import writers_of
+
+    return "stage types that write it: " + ", ".join(sorted({w for p in missing for w in writers_of(p)}))
+
+
+def _cross_refs(case, report):
+    """Checks of the raw case that run whatever the validity of its fields (one pass)."""
+    stages = case.get("stages")
+    if not isinstance(stages, list):
+        return
+    materials = case.get("materials")
+    names = list(materials) if isinstance(materials, Mapping) else []
+    _material_refs(stages, names, report)
+    _stage_inputs(stages, report)
+
+
+def _stage_reporter(report, k):
+    def stage_report(subpath, rule, value=NOVALUE, hint=None):
+        report(("stages", k) + split_subpath(subpath), rule, value, hint)
+    return stage_report
+
+
+def _case_rules(case, report):
+    """Rules of the validated case: inputs a stage's config reads, and each type's case check."""
+    from demcli.stages.base import STAGE_TYPES, has_field, input_scenes
+
+    for k, (cfg, scene) in enumerate(zip(case.stages, input_scenes(case.stages))):
+        st = STAGE_TYPES[cfg.type]
+        sub = _stage_reporter(report, k)
+        reads = st.config_requires(cfg) if st.config_requires is not None and scene is not None else {}
+        for key, paths in reads.items():
+            missing = [p for p in paths if not has_field(scene, p)]
+            if missing:
+                sub(key, f"reads {', '.join(missing)} from the input, which no earlier stage writes",
+                    hint=_writers_hint(missing))
+        if st.case_check is not None:
+            st.case_check(cfg, case, k, scene, sub)
 
 
 @lru_cache(maxsize=1)
@@ -58,13 +143,13 @@ def case_schema():
         variants[name] = Section(fields, doc=st.doc, check=st.check)
     return Section({
         "name": Str(pattern=NAME, default=None, doc="case name (default: the file name)"),
-        "seed": Int(min=0, default=0, doc="random seed of the whole case"),
+        "seed": seed_field("random seed of the whole case (0 to 2^63 - 1)"),
         "dimension": Int(min=2, max=3, default=3, doc="3, or 2 for planar motion (disks)"),
         "thickness": Float("m", min=0, min_inclusive=False, default=1.0,
                            doc="2D only: out-of-plane thickness for disk masses"),
         "materials": Map(MATERIAL, key_pattern=NAME, default={}, doc="materials by name"),
         "stages": List(Tagged("type", variants), min_len=1, unique_by="name", doc="stages, run in order"),
-    }, check=_material_refs)
+    }, check=_case_rules, check_raw=_cross_refs)
 
 
 def load_case(path, overrides=()):

@@ -6,6 +6,12 @@ items), refuses duplicate keys, and turns syntax errors into ``ConfigError`` wit
 ``file:line``. ``apply_overrides`` applies ``--set``-style ``a.b.c=value`` strings.
 ``validate`` runs a schema and raises ``ConfigError`` listing every issue.
 
+Hostile input is refused before it is built: a file over :data:`MAX_CASE_BYTES`, a
+document whose aliases expand to more than :data:`MAX_VALUES` values (a "billion
+laughs" alias bomb is 1.4 kB of text), nesting deeper than Python can recurse, and
+characters YAML does not allow (NUL, control characters) are each a ConfigError
+with the file and line.
+
 Beyond YAML 1.1 as PyYAML reads it, ``1e-5`` (no dot, unsigned exponent) is a float
 here, as in YAML 1.2; PyYAML alone would read it as a string.
 """
@@ -15,17 +21,25 @@ from __future__ import annotations
 import copy
 import os
 import re
+import unicodedata
 from pathlib import Path
 
 import yaml
 from yaml.nodes import MappingNode, ScalarNode, SequenceNode
+from yaml.reader import ReaderError
 
 from demcli.config.schema import NOVALUE, ConfigIssue, format_path, validate_tree
 from demcli.errors import ConfigError
 
-__all__ = ["load_yaml", "apply_overrides", "validate", "load_case"]
+__all__ = ["load_yaml", "apply_overrides", "override_path", "validate", "load_case"]
 
 _MERGE_TAG = "tag:yaml.org,2002:merge"
+
+MAX_CASE_BYTES = 1 << 20
+"""Largest case file read (1 MiB; the shipped cases are under 10 kB)."""
+
+MAX_VALUES = 100_000
+"""Most values (mappings, lists, keys and scalars) a case may expand to, every alias use counted."""
 
 
 class _CaseLoader(yaml.SafeLoader):
@@ -64,10 +78,14 @@ def _read(source, filename):
         if not isinstance(source, str):
             raise TypeError(f"load_yaml needs a path or YAML text, not {type(source).__name__}")
         return source, filename or "<string>"
-    path = Path(source)
     name = filename or str(source)
     try:
-        return path.read_text(encoding="utf-8"), name
+        with open(source, "rb") as f:
+            raw = f.read(MAX_CASE_BYTES + 1)
+        if len(raw) > MAX_CASE_BYTES:
+            rule = f"larger than {MAX_CASE_BYTES} bytes; a case file is a few kB of text"
+        else:
+            return raw.decode("utf-8"), name
     except FileNotFoundError:
         rule = "file not found"
     except IsADirectoryError:
@@ -77,6 +95,53 @@ def _read(source, filename):
     except OSError as exc:
         rule = f"cannot read: {exc.strerror or exc}"
     raise ConfigError([ConfigIssue(name, None, "", rule)])
+
+
+def _bad_character(exc):
+    """The character a ReaderError refuses (NUL, a control character, ...), and the rule it breaks."""
+    ch = chr(exc.character) if isinstance(exc.character, int) else str(exc.character)
+    kind = "control character" if unicodedata.category(ch) == "Cc" else "character"
+    return ch, (f"{kind} U+{ord(ch):04X} is not allowed in YAML; delete it (in a double-quoted string it "
+                "may be written as an escape)")
+
+
+def _reader_issue(exc, text, filename):
+    """A ConfigIssue at the line and column of the character a ReaderError names."""
+    pos = max(0, min(exc.position, len(text)))
+    line = text.count("\n", 0, pos) + 1
+    column = pos - text.rfind("\n", 0, pos)
+    ch, rule = _bad_character(exc)
+    return ConfigIssue(filename, line, "", rule, ch, f"column {column}")
+
+
+def _children(node):
+    if isinstance(node, SequenceNode):
+        return node.value
+    if isinstance(node, MappingNode):
+        return [n for pair in node.value for n in pair]
+    return ()
+
+
+def _oversized(root, limit):
+    """The first node whose expansion (each alias counted at every use) exceeds ``limit``
+    values, or None. Shared nodes are sized once, so an alias bomb costs its text, not its
+    expansion; a node that contains itself counts once here (the builder reports it)."""
+    size = {}
+    stack = [(root, False)]
+    while stack:
+        node, done = stack.pop()
+        if not done:
+            if id(node) in size:
+                continue
+            size[id(node)] = 1  # provisional while its children are sized
+            stack.append((node, True))
+            stack.extend((child, False) for child in _children(node) if id(child) not in size)
+            continue
+        total = 1 + sum(size[id(child)] for child in _children(node))
+        size[id(node)] = total
+        if total > limit:
+            return node
+    return None
 
 
 class _Builder:
@@ -163,19 +228,42 @@ class _Builder:
         return out
 
 
+def _compose(loader, text, filename):
+    """The document's node tree, refused (ConfigError) when it is not YAML or too large."""
+    try:
+        node = loader.get_single_node()
+    except ReaderError as exc:
+        raise ConfigError([_reader_issue(exc, text, filename)]) from None
+    except yaml.YAMLError as exc:
+        raise ConfigError([_yaml_issue(exc, filename)]) from None
+    except RecursionError:
+        line = loader.get_mark().line + 1
+        raise ConfigError([ConfigIssue(filename, line, "", "nested too deeply to read")]) from None
+    big = None if node is None else _oversized(node, MAX_VALUES)
+    if big is not None:
+        raise ConfigError([ConfigIssue(
+            filename, big.start_mark.line + 1, "",
+            f"this value expands to more than {MAX_VALUES} values (every alias counted at each use: an "
+            "alias bomb?); a case needs far fewer")])
+    return node
+
+
 def _parse(text, filename):
     """Compose YAML text into ``(data, marks, issues)``; syntax errors raise ConfigError."""
-    loader = _CaseLoader(text)
     try:
-        try:
-            node = loader.get_single_node()
-        except yaml.YAMLError as exc:
-            raise ConfigError([_yaml_issue(exc, filename)]) from None
+        loader = _CaseLoader(text)
+    except ReaderError as exc:  # the reader checks every character up front
+        raise ConfigError([_reader_issue(exc, text, filename)]) from None
+    try:
+        node = _compose(loader, text, filename)
         if node is None:
             return None, {}, []
         builder = _Builder(loader, filename)
         builder.marks[()] = node.start_mark.line + 1
-        data = builder.build(node, ())
+        try:
+            data = builder.build(node, ())
+        except RecursionError:
+            raise ConfigError([ConfigIssue(filename, None, "", "nested too deeply to read")]) from None
         return data, builder.marks, builder.issues
     finally:
         loader.dispose()
@@ -215,11 +303,20 @@ def load_yaml(path_or_text, filename=None):
 
 
 def _parse_override_value(text):
-    loader = _CaseLoader(text)
+    """An override's value read as YAML; ValueError (with the reason) when it is not YAML."""
+    loader = None
     try:
+        loader = _CaseLoader(text)  # the reader checks every character up front
         return loader.get_single_data()
+    except ReaderError as exc:
+        raise ValueError(f"the value is not valid YAML: {_bad_character(exc)[1]}") from None
+    except yaml.YAMLError as exc:
+        raise ValueError(f"the value is not valid YAML: {getattr(exc, 'problem', None) or exc}") from None
+    except RecursionError:
+        raise ValueError("the value is nested too deeply to read") from None
     finally:
-        loader.dispose()
+        if loader is not None:
+            loader.dispose()
 
 
 def _label_subtree(marks, path, value, label):
@@ -235,80 +332,98 @@ def _label_subtree(marks, path, value, label):
             stack.extend((p + (i,), item) for i, item in enumerate(v))
 
 
+_PATH_TOKEN = re.compile(r"""\.|\[\s*(?:'([^']*)'|"([^"]*)"|([^\]'"]*?))\s*\]|([^.\[\]]+)""")
+
+
+def override_path(text):
+    """The segments of an override path: ``stages.settle.walls[1].max``, ``stages.settle.walls.1.max``
+    and ``stages[settle].walls[box].max`` (items by name) all work, as do the paths messages
+    print (``materials['a.b']``). Raises ValueError naming what is wrong."""
+    segments, pos, want_name = [], 0, True
+    while pos < len(text):
+        m = _PATH_TOKEN.match(text, pos)
+        if m is None:
+            raise ValueError(f"unbalanced brackets in path {text!r}")
+        if m.group(0) == "." and want_name:
+            raise ValueError(f"empty segment in path {text!r}")
+        if m.group(0) != ".":
+            name = m.group(4)
+            if name is not None and not want_name:
+                raise ValueError(f"a '.' must come before {name.strip()!r} in path {text!r}")
+            seg = (name if name is not None else next(g for g in m.groups()[:3] if g is not None)).strip()
+            if not seg:
+                raise ValueError(f"empty segment in path {text!r}")
+            segments.append(seg)
+        want_name = m.group(0) == "."
+        pos = m.end()
+    if want_name:
+        raise ValueError(f"empty segment in path {text!r}")
+    return segments
+
+
+def _list_index(node, seg, path):
+    """Index of list item ``seg`` (a number, or an item's ``name``); ValueError if none."""
+    if re.fullmatch(r"-?\d+", seg):
+        index = int(seg)
+        if not -len(node) <= index < len(node):
+            raise ValueError(f"{format_path(path) or 'the list'} has {len(node)} items; no index {index}")
+        return index % len(node)
+    hits = [i for i, item in enumerate(node) if isinstance(item, dict) and item.get("name") == seg]
+    if len(hits) != 1:
+        names = [item.get("name") for item in node if isinstance(item, dict)]
+        names = ", ".join(repr(n) for n in names if n is not None) or "none"
+        what = "no item" if not hits else f"{len(hits)} items"
+        raise ValueError(f"{format_path(path)} has {what} named {seg!r} (names: {names})")
+    return hits[0]
+
+
+def _set_path(data, marks, parts, value, label):
+    """Set ``value`` at the segments ``parts`` of ``data`` (creating missing mapping keys)."""
+    node, path = data, ()
+    for depth, seg in enumerate(parts):
+        if isinstance(node, list):
+            step = _list_index(node, seg, path)
+        elif isinstance(node, dict):
+            step = seg
+            if seg not in node and re.fullmatch(r"-?\d+", seg) and int(seg) in node:
+                step = int(seg)
+        else:
+            raise ValueError(f"{format_path(path)} is {_kind(node)}, so it has no {seg!r}")
+        if depth == len(parts) - 1:
+            node[step] = value
+            _label_subtree(marks, path + (step,), value, label)
+            return
+        child = node.get(step) if isinstance(node, dict) else node[step]
+        if child is None and isinstance(node, dict):
+            child = node[step] = {}
+            marks[path + (step,)] = label
+        node, path = child, path + (step,)
+
+
 def apply_overrides(data, marks, overrides):
     """Apply ``"a.b.c=value"`` overrides; return new ``(data, marks)`` (inputs untouched).
 
-    Segments address mapping keys, list indices (``stages.0.steps``) or list items
-    by their ``name`` key (``stages.settle.steps``). The value is read as YAML
-    (``3``, ``"40 kN"``, ``[1, 2]``, ``{mu: 0.3}``). Missing mapping keys are created
-    (an unknown key is then reported by validation); a missing list item, an index
-    out of range, or a path through a plain value is an error right away. All
-    problems are collected into one ConfigError. Values set here are marked in
-    ``marks`` with the label ``--set <override>`` instead of a line.
+    Segments address mapping keys, list indices (``stages.0.steps`` or ``stages[0].steps``)
+    or list items by their ``name`` key (``stages.settle.steps``, ``stages[settle].steps``);
+    see :func:`override_path`. The value is read as YAML (``3``, ``"40 kN"``, ``[1, 2]``,
+    ``{mu: 0.3}``). Missing mapping keys are created (an unknown key is then reported by
+    validation); a missing list item, an index out of range, or a path through a plain value
+    is an error right away. All problems are collected into one ConfigError. Values set here
+    are marked in ``marks`` with the label ``--set <override>`` instead of a line.
     """
     data = copy.deepcopy(data)
     marks = dict(marks)
     issues = []
-
-    def fail(text, rule):
-        issues.append(ConfigIssue(f"--set {text}", None, "", rule))
-
     for text in overrides:
         key_text, sep, value_text = text.partition("=")
-        key_text = key_text.strip()
-        if not sep or not key_text:
-            fail(text, "an override must read path=value, e.g. stages.settle.steps=100")
-            continue
-        parts = key_text.split(".")
-        if any(not p.strip() for p in parts):
-            fail(text, f"empty segment in path {key_text!r}")
-            continue
         try:
+            if not sep or not key_text.strip():
+                raise ValueError("an override must read path=value, e.g. stages.settle.steps=100")
+            parts = override_path(key_text.strip())
             value = _parse_override_value(value_text)
-        except yaml.YAMLError as exc:
-            fail(text, f"the value is not valid YAML: {getattr(exc, 'problem', None) or exc}")
-            continue
-        label = f"--set {text}"
-        node, path = data, ()
-        for depth, raw in enumerate(parts):
-            seg = raw.strip()
-            last = depth == len(parts) - 1
-            if isinstance(node, list):
-                if re.fullmatch(r"-?\d+", seg):
-                    index = int(seg)
-                    if not -len(node) <= index < len(node):
-                        fail(text, f"{format_path(path) or 'the list'} has {len(node)} items; "
-                                   f"no index {index}")
-                        break
-                    index %= len(node)
-                else:
-                    hits = [i for i, item in enumerate(node)
-                            if isinstance(item, dict) and item.get("name") == seg]
-                    if len(hits) != 1:
-                        names = [item.get("name") for item in node if isinstance(item, dict)]
-                        names = ", ".join(repr(n) for n in names if n is not None) or "none"
-                        what = "no item" if not hits else f"{len(hits)} items"
-                        fail(text, f"{format_path(path)} has {what} named {seg!r} (names: {names})")
-                        break
-                    index = hits[0]
-                step = index
-            elif isinstance(node, dict):
-                step = seg
-                if seg not in node and re.fullmatch(r"-?\d+", seg) and int(seg) in node:
-                    step = int(seg)
-            else:
-                fail(text, f"{format_path(path)} is {_kind(node)}, so it has no {seg!r}")
-                break
-            if last:
-                node[step] = value
-                _label_subtree(marks, path + (step,), value, label)
-            else:
-                child = node.get(step) if isinstance(node, dict) else node[step]
-                if child is None and isinstance(node, dict):
-                    child = node[step] = {}
-                    marks[path + (step,)] = label
-                node = child
-            path = path + (step,)
+            _set_path(data, marks, parts, value, f"--set {text}")
+        except ValueError as exc:
+            issues.append(ConfigIssue(f"--set {text}", None, "", str(exc)))
     if issues:
         raise ConfigError(issues)
     return data, marks

@@ -20,7 +20,9 @@ raises ``ConfigError``). Validation never stops at the first problem: every issu
 collected as a :class:`ConfigIssue` (``case.yaml:14: stages[2].friction.mu: must be
 >= 0 (got -0.2)``). Cross-field rules go in a Section's ``check(node, report)``,
 which runs only when all of that section's fields were valid (types and ranges
-first, then cross-field rules, as in STYLE.md section 5).
+first, then cross-field rules, as in STYLE.md section 5). Cross-references that
+should be reported together with every other problem (a name that refers to nothing)
+go in ``check_raw(mapping, report)``, which sees the raw mapping and always runs.
 
 The result is a tree of :class:`Node` (read-only mapping with attribute access),
 tuples for lists, floats in SI for quantities. ``Node.to_dict()``,
@@ -65,6 +67,8 @@ __all__ = [
     "Optional",
     "validate_tree",
     "format_path",
+    "split_subpath",
+    "did_you_mean",
     "canonical_json",
     "sha256_of",
 ]
@@ -157,7 +161,8 @@ class ConfigIssue:
         return text
 
 
-def _did_you_mean(word, candidates):
+def did_you_mean(word, candidates):
+    """``"did you mean 'x'?"`` for the candidate closest to ``word``, or None."""
     if not isinstance(word, str):
         return None
     close = difflib.get_close_matches(word, [str(c) for c in candidates], n=1, cutoff=0.6)
@@ -550,7 +555,7 @@ class Str(Field):
             return _INVALID
         if self.choices is not None and value not in self.choices:
             ctx.error(path, f"must be one of {_one_of(self.choices)}", value,
-                      _did_you_mean(value, self.choices))
+                      did_you_mean(value, self.choices))
             return _INVALID
         if self._regex is not None and not self._regex.fullmatch(value):
             ctx.error(path, f"must match {self.pattern!r}", value)
@@ -666,12 +671,15 @@ class Section(Field):
     ``check(node, report)`` runs after every field of the section is valid;
     ``report(subpath, rule, value=NOVALUE, hint=None)`` adds an issue, ``subpath``
     being ``''`` (the section), ``'e_max'``, ``'walls.0.z'`` or a tuple.
-    An empty YAML value (``gravity:``) is an empty mapping, so defaults apply.
+    ``check_raw(mapping, report)`` runs on the raw (unvalidated) mapping whatever the
+    fields' validity, so its issues come in the same pass as theirs; it must expect
+    values of any type. An empty YAML value (``gravity:``) is an empty mapping, so
+    defaults apply.
     """
 
     type_name = "section"
 
-    def __init__(self, fields, doc="", check=None, default=REQUIRED):
+    def __init__(self, fields, doc="", check=None, default=REQUIRED, check_raw=None):
         super().__init__(default, doc)
         for name, field in fields.items():
             if not isinstance(field, Field):
@@ -683,6 +691,7 @@ class Section(Field):
                 )
         self.fields = dict(fields)
         self.check = check
+        self.check_raw = check_raw
 
     def validate(self, value, path, ctx):
         if value is None:
@@ -698,7 +707,7 @@ class Section(Field):
         for key in value:
             if key in skip or key in self.fields:
                 continue
-            hint = _did_you_mean(key, self.fields) or (
+            hint = did_you_mean(key, self.fields) or (
                 f"expected one of {_one_of(self.fields)}" if self.fields else "this section takes no keys"
             )
             ctx.error(path + (key,), "unknown key", hint=hint)
@@ -712,6 +721,8 @@ class Section(Field):
                 out[name] = _INVALID
             else:
                 out[name] = field.default_value(sub, ctx.marks)
+        if self.check_raw is not None:
+            self.check_raw(value, _reporter(path, ctx))
         if len(ctx.issues) > n0:
             return _INVALID
         node = Node(out, path, ctx.marks)
@@ -733,15 +744,18 @@ class Section(Field):
         return list(self.describe(""))
 
 
+def split_subpath(subpath):
+    """A check's subpath as a tuple: ``''``/None -> ``()``, ``'walls.0.z'`` -> ``('walls', 0, 'z')``."""
+    if subpath in (None, "", ()):
+        return ()
+    if isinstance(subpath, str):
+        return tuple(int(p) if p.isdigit() else p for p in subpath.split("."))
+    return tuple(subpath)
+
+
 def _reporter(path, ctx):
     def report(subpath, rule, value=NOVALUE, hint=None):
-        if subpath in (None, "", ()):
-            sub = ()
-        elif isinstance(subpath, str):
-            sub = tuple(int(p) if p.isdigit() else p for p in subpath.split("."))
-        else:
-            sub = tuple(subpath)
-        ctx.error(path + sub, rule, value, hint)
+        ctx.error(path + split_subpath(subpath), rule, value, hint)
 
     return report
 
@@ -822,7 +836,7 @@ class Tagged(Field):
         tag = value[self.tag_key]
         if not isinstance(tag, str) or tag not in self.variants:
             ctx.error(path + (self.tag_key,), f"unknown {self.tag_key}", tag,
-                      _did_you_mean(tag, self.variants) or f"expected one of {_one_of(self.variants)}")
+                      did_you_mean(tag, self.variants) or f"expected one of {_one_of(self.variants)}")
             return _INVALID
         return self.variants[tag].validate_mapping(
             value, path, ctx, skip=(self.tag_key,), first={self.tag_key: tag}

@@ -40,7 +40,7 @@ import numpy as np
 from demcli.config.schema import Float, Int, Optional, Section, Str
 from demcli.errors import StageError
 from demcli.stages import asphalt_common  # noqa: F401  (registers the seeds and aggregates groups)
-from demcli.stages.base import StageType, register_stage
+from demcli.stages.base import StageType, earlier_stage, register_stage
 
 FIELDS = {
     "lattice": Section({
@@ -92,6 +92,24 @@ def _check(node, report):
     if fe.share < 1 and not p.ratio.min < fe.ratio:
         report("flat_elongated.ratio", f"must exceed planes.ratio.min ({p.ratio.min:g}) to draw regular particles",
                fe.ratio)
+
+
+def _case_check(cfg, case, k, scene, report):
+    """The ball lattice over the region of the place_spheres stage before: it must fit, and
+    the machine must hold its balls."""
+    from demcli.config.memory import check_memory
+    from demcli.geometry.carving import make_lattice
+
+    seeds = earlier_stage(case, k, "place_spheres")
+    if seeds is None:
+        return
+    key = "lattice.count" if cfg.lattice.count is not None else "lattice.spacing"
+    try:
+        lat = make_lattice(seeds.region.min, seeds.region.max, spacing=cfg.lattice.spacing, count=cfg.lattice.count)
+    except ValueError as exc:
+        report(key, f"no lattice in the region of stage {seeds.name!r}: {exc}")
+        return
+    check_memory(report, key, lat.size, f"the ball lattice over the region of stage {seeds.name!r}")
 
 
 REDRAW_MAX = 100  # further cuts of a seed that caught no ball or sieved as fines (see Carver.carve)
@@ -476,6 +494,7 @@ def describe(cfg, case):
 
 
 register_stage(StageType(
-    "carve", FIELDS, run, check=_check, describe=describe,
+    "carve", FIELDS, run, check=_check, describe=describe, case_check=_case_check,
     requires=("seeds/centre", "seeds/radius", "seeds/region", "gradation/class_lower", "gradation/class_share"),
+    provides=("bodies/*", "spheres/*", "aggregates/*", "seeds/*", "records/*"), keeps=("gradation",),
     doc="aggregates carved from a ball lattice by three random plane pairs per seed sphere (seed 000)"))

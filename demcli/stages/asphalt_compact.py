@@ -50,7 +50,7 @@ from demcli.config.schema import Float, Int, Optional, Section, Str
 from demcli.errors import InputError
 from demcli.stages import dem
 from demcli.stages import asphalt_common  # noqa: F401  (registers the seeds and aggregates groups)
-from demcli.stages.base import StageType, register_stage
+from demcli.stages.base import ENGINE_KEEPS, ENGINE_OUTPUT, StageType, register_stage
 from demcli.state.fields import Field, register, register_group
 
 register_group("compaction", "Summary of a compact stage (seed 000): porosity before and after, final box",
@@ -353,5 +353,6 @@ def describe(cfg, case):
 register_stage(StageType(
     "compact", FIELDS, run, check=_check, describe=describe, orders_particles=True,
     requires=("bodies/x", "spheres/radius", "aggregates/volume"),
-    plan=dem.plan_summary,
+    provides=ENGINE_OUTPUT + ("compaction/*",), keeps=("aggregates", "seeds", "gradation") + ENGINE_KEEPS,
+    case_check=dem.scene_check, plan=dem.plan_summary,
     doc="box walls press the aggregates (servo stress or target porosity); porosity against time (seed 000)"))

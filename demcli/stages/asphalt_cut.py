@@ -219,4 +219,6 @@ def describe(cfg, case):
 
 register_stage(StageType(
     "cut", FIELDS, run, describe=describe, requires=("bodies/x", "spheres/radius", "aggregates/body"),
+    provides=("bodies/*", "spheres/*", "aggregates/*", "specimen/*", "records/*"),
+    keeps=("seeds", "gradation", "contacts"),
     doc="cut a cylinder or prism specimen; crossing aggregates trimmed, kept whole or dropped (seed 000)"))

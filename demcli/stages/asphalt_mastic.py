@@ -60,7 +60,7 @@ import numpy as np
 from demcli.config.schema import Float, List, Section, Str, Tagged
 from demcli.errors import InputError, StageError, StateError
 from demcli.stages import asphalt_common  # noqa: F401  (registers the seeds and aggregates groups)
-from demcli.stages.base import StageType, register_stage
+from demcli.stages.base import StageType, earlier_stage, register_stage
 from demcli.state.fields import Field, register, register_group
 
 PHASES = ("aggregate", "mastic")
@@ -169,6 +169,28 @@ def _check(node, report):
             if pair not in seen:
                 report("contacts", f"no contact model for the phase pair {pair[0]}-{pair[1]} (every pair needs one)",
                        None)
+
+
+def _mix_inputs(cfg):
+    """Input fields a mastic config reads besides: amount by mix, the gradation's totals."""
+    return {"amount.by": ("gradation/totals",)} if cfg.amount.by == "mix" else {}
+
+
+def _case_check(cfg, case, k, scene, report):
+    """Memory for the mastic cells over the specimen of the cut stage before, and for an
+    amount by mix, a mix with aggregate."""
+    from demcli.config.memory import check_memory
+    from demcli.stages.asphalt_cut import _size, volume_of
+    from demcli.stages.gradation import compute
+
+    cut = earlier_stage(case, k, "cut")
+    if cut is not None:
+        cells = volume_of(cut.shape.shape, _size(cut.shape)) / (2.0 * cfg.ball_radius) ** 3
+        check_memory(report, "ball_radius", cells, f"the mastic cells over the specimen of stage {cut.name!r}",
+                      cfg.ball_radius)
+    grading = earlier_stage(case, k, "gradation")
+    if cfg.amount.by == "mix" and grading is not None and compute(grading)["totals"][1] <= 0:
+        report("amount", f"the mix of stage {grading.name!r} has no aggregate volume")
 
 
 def pair_table(contacts):
@@ -442,6 +464,8 @@ def describe(cfg, case):
 
 
 register_stage(StageType(
-    "mastic", FIELDS, run, check=_check, describe=describe,
+    "mastic", FIELDS, run, check=_check, describe=describe, case_check=_case_check, config_requires=_mix_inputs,
     requires=("specimen/volume", "specimen/aggregate_volume", "aggregates/body"),
+    provides=("bodies/*", "spheres/*", "phases/*", "mastic/*", "records/*"),
+    keeps=("aggregates", "seeds", "gradation", "specimen", "contacts"),
     doc="mastic balls in the voids by mass and density; contact models by phase pair (seed 000)"))

@@ -27,7 +27,7 @@ import numpy as np
 from demcli.config.schema import Float, Int, Section, Str, Tagged, Vector
 from demcli.errors import InputError, StageError
 from demcli.stages import asphalt_common  # noqa: F401  (registers the seeds and aggregates groups)
-from demcli.stages.base import StageType, register_stage
+from demcli.stages.base import StageType, earlier_stage, register_stage, require_dimension
 
 REGION = Section({"min": Vector(3, "m", doc="lower corner"), "max": Vector(3, "m", doc="upper corner")},
                  doc="box the spheres are placed in (the carving region)")
@@ -49,6 +49,23 @@ def _check(node, report):
     for d in range(3):
         if node.region.max[d] <= node.region.min[d]:
             report(f"region.max.{d}", f"must be > region.min ({node.region.min[d]:g} m)", node.region.max[d])
+
+
+def _case_check(cfg, case, k, scene, report):
+    """A 3D case, and room in the region for the largest class of the gradation."""
+    from demcli.config.memory import check_memory
+    from demcli.stages.gradation import compute
+
+    require_dimension(case, 3, "a place_spheres specimen", report)
+    if cfg.target.kind == "count":
+        check_memory(report, "target.count", cfg.target.count, "the seed spheres", cfg.target.count)
+    grading = earlier_stage(case, k, "gradation")
+    if grading is not None:
+        largest = float(compute(grading)["class_upper"].max())
+        across = float(min(np.array(cfg.region.max) - np.array(cfg.region.min)))
+        if largest > across:
+            report("region", f"the largest class of stage {grading.name!r} ({largest * 1e3:g} mm) does not fit the "
+                   f"region ({across * 1e3:g} mm across)")
 
 
 def class_counts(share, lower, upper, total):
@@ -91,8 +108,6 @@ def run(ctx, cfg, state_in):
     from demcli.state import RecordTable
     from demcli.stages.asphalt_common import copy_group
 
-    if ctx.case.dimension != 3:
-        raise InputError(f"stage {ctx.name}: place_spheres builds 3D specimens; set dimension: 3")
     g = state_in.groups["gradation"]
     lower = np.asarray(g["class_lower"], float)
     upper = np.asarray(g["class_upper"], float)
@@ -143,6 +158,7 @@ def describe(cfg, case):
 
 
 register_stage(StageType(
-    "place_spheres", FIELDS, run, check=_check, describe=describe,
+    "place_spheres", FIELDS, run, check=_check, describe=describe, case_check=_case_check,
     requires=("gradation/class_lower", "gradation/class_upper", "gradation/class_share"),
+    provides=("bodies/*", "spheres/*", "seeds/*", "records/*"), keeps=("gradation",),
     doc="seed spheres drawn by gradation and placed without overlap (seed 000, carving seeds)"))

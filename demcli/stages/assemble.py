@@ -44,7 +44,7 @@ import numpy as np
 
 from demcli.config.schema import Bool, Float, Int, Optional, Section, Str, Vector
 from demcli.errors import StageError
-from demcli.stages.base import StageType, register_stage
+from demcli.stages.base import StageType, earlier_stage, register_stage
 
 
 def _check(node, report):
@@ -54,6 +54,23 @@ def _check(node, report):
     total = (node.needle_share or 0.0) + (node.flaky_share or 0.0)
     if total > 1.0:
         report("flaky_share", f"needle_share + flaky_share must not exceed 1 (got {total:g})", node.flaky_share)
+
+
+def _case_check(cfg, case, k, scene, report):
+    """Every class with a volume must be one a library covers (a positive lower size)."""
+    from demcli.stages.ballast_library import library_classes
+    from demcli.stages.gradation import compute
+
+    grading = earlier_stage(case, k, "gradation")
+    if grading is None:
+        return
+    res = compute(grading)
+    covered = set(library_classes(res["class_lower"], res["class_upper"]).tolist())
+    for j, (lo, hi, share) in enumerate(zip(res["class_lower"], res["class_upper"], res["class_share"])):
+        if res["class_amount"][j] > 0 and j not in covered:
+            report("", f"size class {lo * 1e3:g}-{hi * 1e3:g} mm of stage {grading.name!r} holds {share:g} % of the "
+                   "mass but a library has no particles for it (a library covers classes with a positive lower "
+                   "size)", hint="set the gradation's volumetrics.min_size")
 
 
 FIELDS = {
@@ -433,7 +450,9 @@ def run(ctx, cfg, state_in):
 
 
 register_stage(StageType(
-    "assemble", FIELDS, run, needs_input=True, check=_check,
+    "assemble", FIELDS, run, needs_input=True, check=_check, case_check=_case_check,
     requires=("gradation/sieves", "gradation/passing", "gradation/class_lower", "gradation/class_upper",
               "gradation/class_amount", "gradation/class_count", "library/path", "library/generator"),
+    provides=("bodies/*", "spheres/*", "polyhedra/*", "polyhedron_shapes/*", "records/*"),
+    keeps=("gradation", "library"),
     doc="draw a graded set of polyhedra from the ballast library (Shao et al. 2017) and stack it in the box"))

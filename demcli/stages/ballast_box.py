@@ -43,7 +43,7 @@ import numpy as np
 from demcli.config.schema import Bool, Float, Int, Node, Optional, Section, Str, Vector
 from demcli.errors import InputError
 from demcli.stages import dem
-from demcli.stages.base import StageType, register_stage
+from demcli.stages.base import ENGINE_KEEPS, ENGINE_OUTPUT, StageType, register_stage
 from demcli.state.fields import Field, register, register_group
 
 register_group("bed", "Ballast bed measures at the end of a ballast box stage (seed 002)",
@@ -600,13 +600,18 @@ def _describe(kind):
     return describe
 
 
-_REQ = ("bodies/x", "polyhedra/shape")
-register_stage(StageType("deposit", DEPOSIT, run_deposit, requires=_REQ, check=_check_deposit,
-                         describe=_describe("deposit"),
+def _shoulder_inputs(cfg):
+    """Input fields a sleeper config reads besides: filling the shoulders draws from the library."""
+    return {"shoulders.fill": ("gradation/class_amount", "gradation/class_count", "library/path",
+                               "library/generator")} if cfg.shoulders.fill else {}
+
+
+_IO = dict(requires=("bodies/x", "polyhedra/shape"), keeps=CARRIED + ENGINE_KEEPS, case_check=dem.scene_check,
+           provides=ENGINE_OUTPUT + ("polyhedra/*", "polyhedron_shapes/*", "bed/*"))
+register_stage(StageType("deposit", DEPOSIT, run_deposit, check=_check_deposit, describe=_describe("deposit"), **_IO,
                          doc="gravity deposition of a polyhedral bed until at rest; bulk density and porosity"))
-register_stage(StageType("vibrate", VIBRATE, run_vibrate, requires=_REQ, check=_check_cyclic,
-                         describe=_describe("vibrate"),
+register_stage(StageType("vibrate", VIBRATE, run_vibrate, check=_check_cyclic, describe=_describe("vibrate"), **_IO,
                          doc="plate vibration compaction: density and void ratio per cycle (seed 002)"))
-register_stage(StageType("sleeper", SLEEPER, run_sleeper, requires=_REQ, check=_check_cyclic,
-                         describe=_describe("sleeper"),
+register_stage(StageType("sleeper", SLEEPER, run_sleeper, check=_check_cyclic, describe=_describe("sleeper"), **_IO,
+                         config_requires=_shoulder_inputs,
                          doc="sleeper on the compacted bed, shoulders filled, cyclic load: settlement per cycle"))

@@ -36,7 +36,7 @@ import numpy as np
 
 from demcli.config.schema import Bool, Float, Optional, Section, Str
 from demcli.errors import InputError
-from demcli.stages.base import StageType, register_stage
+from demcli.stages.base import StageType, earlier_stage, register_stage
 from demcli.state.fields import Field, register, register_group
 
 WRITER = "stage clumpify"
@@ -69,6 +69,27 @@ def _check(node, report):
     b = node.balls
     if (b.diameter is None) == (b.relative is None):
         report("balls", "give exactly one of diameter or relative", None)
+
+
+def _case_check(cfg, case, k, scene, report):
+    """Memory for the balls: the solids of the gradation before, over a ball's lattice cell (of
+    ``relative`` x the class's lower size where the diameter follows the particles)."""
+    from demcli.config.memory import check_memory
+    from demcli.stages.ballast_library import library_classes
+    from demcli.stages.gradation import compute
+
+    grading = earlier_stage(case, k, "gradation")
+    if grading is None:
+        return
+    res = compute(grading)
+    keep = library_classes(res["class_lower"], res["class_upper"])
+    b = cfg.balls
+    if b.diameter is not None:
+        key, value, cell = "balls.diameter", b.diameter, b.diameter ** 3
+    else:
+        key, value, cell = "balls.relative", b.relative, (b.relative * res["class_lower"][keep]) ** 3
+    check_memory(report, key, float(np.sum(res["class_amount"][keep] / cell)),
+                 f"the balls of the solids of stage {grading.name!r}", value)
 
 
 def ball_spacing(cfg_balls, sieve_size, circumradius):
@@ -237,6 +258,7 @@ def describe(cfg, case):
 
 
 register_stage(StageType(
-    "clumpify", FIELDS, run, check=_check, describe=describe,
+    "clumpify", FIELDS, run, check=_check, describe=describe, case_check=_case_check,
     requires=("bodies/x", "polyhedra/shape", "polyhedra/sieve_size", "polyhedron_shapes/volume"),
+    provides=("bodies/*", "spheres/*", "clumps/*", "records/*"), keeps=("gradation",),
     doc="polyhedral particles become rigid clumps of lattice balls (multi-sphere), mass properties kept"))

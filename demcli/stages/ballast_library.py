@@ -41,6 +41,7 @@ Library file layout (HDF5; attributes ``format``, ``version``, ``hash``, ``gener
 """
 
 import json
+import math
 import os
 import time
 from dataclasses import dataclass
@@ -48,9 +49,10 @@ from pathlib import Path
 
 import numpy as np
 
+from demcli.config.case import seed_field
 from demcli.config.schema import Float, Int, Optional, Section, Str, Tagged
 from demcli.errors import StageError, StateError
-from demcli.stages.base import StageType, register_stage
+from demcli.stages.base import StageType, earlier_stage, register_stage
 from demcli.state.fields import Field, register, register_group
 
 LIBRARY_FORMAT = "demcli ballast library"
@@ -112,7 +114,7 @@ SHAPE = Tagged("method", {
 
 FIELDS = {
     "per_class": Int(min=1, default=500, doc="particles per size class (Shao et al. 2017: 10 000)"),
-    "seed": Optional(Int(min=0), doc="seed of the library (default: the case seed)"),
+    "seed": Optional(seed_field("seed of the library (0 to 2^63 - 1; default: the case seed)")),
     "shape": SHAPE,
     "sieve_method": Str(choices=list(SIEVE_METHODS), default="projection", doc="how particles are sized"),
     "flaky_ratio": Float(min=0, max=1, min_inclusive=False, default=0.6,
@@ -403,6 +405,48 @@ def library_group(lib):
             "elongated_share": stat(lambda r: 100.0 * p["elongated"][r].mean())}
 
 
+def particle_volume_bound(cfg, size):
+    """Largest volume [m^3] a particle of sieve size ``size`` [m] in the library of ``cfg`` can
+    have. volume_sphere and volume_cube fix it; a particle that passes a square hole of side s
+    (projection, inertia_square) has a cross-section within s^2 and a length L <= I / e_min with
+    its intermediate size I <= sqrt(2) s, so V <= sqrt(2) s^3 / e_min (e_min: shape.elongation.min;
+    generated shapes stay below a third of this)."""
+    if cfg.sieve_method == "volume_sphere":
+        return math.pi / 6.0 * size ** 3
+    if cfg.sieve_method == "volume_cube":
+        return size ** 3
+    return math.sqrt(2.0) * size ** 3 / cfg.shape.elongation.min
+
+
+def _case_check(cfg, case, k, scene, report):
+    """A library for an assemble stage must be able to fill every class of the gradation it
+    is built for: per_class particles, each at most :func:`particle_volume_bound`."""
+    from demcli.config.memory import BYTES_PER_POLYHEDRON, check_memory
+    from demcli.stages.gradation import compute
+
+    grading = earlier_stage(case, k, "gradation")
+    if grading is None:
+        return
+    res = compute(grading)
+    lower, upper, amount = res["class_lower"], res["class_upper"], res["class_amount"]
+    keep = library_classes(lower, upper)
+    if not len(keep):
+        report("", f"the gradation of stage {grading.name!r} has no class with a positive lower size to build a "
+               "library for", hint="set its volumetrics.min_size")
+        return
+    check_memory(report, "per_class", cfg.per_class * len(keep), f"the library of {len(keep)} classes", cfg.per_class,
+                 "polyhedra", BYTES_PER_POLYHEDRON)
+    if not any(c.type == "assemble" for c in case.stages[k + 1:]):
+        return
+    short = [(amount[j] / particle_volume_bound(cfg, upper[j]), j) for j in keep if amount[j] > 0]
+    need, j = max(short, default=(0.0, None))
+    if need > cfg.per_class:
+        vmax = particle_volume_bound(cfg, upper[j]) * 1e6
+        report("per_class", f"class {lower[j] * 1e3:g}-{upper[j] * 1e3:g} mm of stage {grading.name!r} needs "
+               f"{amount[j] * 1e6:.4g} cm^3 of ballast, more than {cfg.per_class} particles of at most "
+               f"{vmax:.3g} cm^3 can hold", cfg.per_class, f"raise per_class to at least {math.ceil(need)}")
+
+
 def default_directory(ctx):
     return ctx.runner.run_dir.resolve().parent / "_library"
 
@@ -446,6 +490,7 @@ def run(ctx, cfg, state_in):
 
 
 register_stage(StageType(
-    "ballast_library", FIELDS, run, needs_input=True,
+    "ballast_library", FIELDS, run, needs_input=True, case_check=_case_check,
     requires=("gradation/class_lower", "gradation/class_upper"),
+    provides=("bodies/*", "spheres/*", "library/*", "records/*"), keeps=("gradation",),
     doc="random convex polyhedra sized by sieve and filed by class in a shared, content-addressed HDF5 library"))

@@ -2,11 +2,23 @@
 
 A stage type module calls :func:`register_stage` at import; the case schema is built
 from the registry, so a new stage is one new module and nothing else changes.
+
+Each type declares the state fields it reads (``requires``) and writes (``provides``,
+plus the input groups it ``keeps``), so that case validation can follow the stages in
+order (:func:`input_scenes`) and refuse a stage whose input no earlier stage writes
+before anything runs.
 """
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 STAGE_TYPES = {}
+
+ENGINE_OUTPUT = ("bodies/*", "spheres/*", "contacts/*", "wall_contacts/*", "walls/*", "energy/*", "records/*")
+"""What a stage that integrates the scene (:func:`demcli.stages.dem.integrate`) writes."""
+
+ENGINE_KEEPS = ("polyhedra", "polyhedron_shapes", "bonds", "bond_models")
+"""Input groups the integrated scene carries on when the input has them."""
 
 
 @dataclass(frozen=True)
@@ -27,6 +39,16 @@ class StageType:
             the stage (and before hashing it) where :func:`demcli.state.order.spatial_order`
             can: spheres, and no contacts, bonds, actors or checkpoint yet. Set by the stages
             that integrate a sphere scene from its first step (dem, compact).
+        provides: state fields the stage writes, ``group/name`` or ``group/*`` (every field
+            of the group).
+        keeps: groups of the input state that the output carries on when the input has them.
+        config_requires: optional ``config_requires(cfg) -> {key: fields}``: further input
+            fields that this config reads (beyond ``requires``) by the config key that reads
+            them, checked at validation.
+        case_check: optional ``case_check(cfg, case, k, scene, report)``: rules that need the
+            whole validated case (the case's dimension, earlier stages, the machine's memory);
+            ``k`` is the stage's index, ``scene`` the fields of its input (None when unknown) and
+            ``report`` reports relative to the stage, as a Section check's does.
     """
 
     name: str
@@ -39,9 +61,14 @@ class StageType:
     doc: str = ""
     describe: object = None
     orders_particles: bool = False
+    provides: tuple = ()
+    keeps: tuple = ()
+    config_requires: object = None
+    case_check: object = None
 
 
 def register_stage(stage_type):
+    """Add a stage type to the registry (once per name); returns it."""
     if stage_type.name in STAGE_TYPES:
         raise ValueError(f"stage type {stage_type.name!r} registered twice")
     STAGE_TYPES[stage_type.name] = stage_type
@@ -59,3 +86,56 @@ def load_stage_types():
     from demcli.stages import sand_asphalt  # noqa: F401  (bonded viscoelastic specimens, seed 003)
 
     return STAGE_TYPES
+
+
+def _group(path):
+    return path.rsplit("/", 1)[0]
+
+
+def has_field(scene, path):
+    """Whether a scene (a set of ``group/name`` and ``group/*`` entries) holds field ``path``."""
+    return path in scene or f"{_group(path)}/*" in scene
+
+
+def type_of(cfg):
+    """The StageType of a stage config (a validated Node or raw data), None when unknown."""
+    name = cfg.get("type") if isinstance(cfg, Mapping) else None
+    return STAGE_TYPES.get(name) if isinstance(name, str) else None
+
+
+def input_scenes(stages):
+    """The state fields the input of each stage holds, following ``stages`` (validated Nodes or
+    raw mappings) in order: a frozenset per stage, None for the first stage (no input) and
+    after a stage whose type is unknown (nothing known to check against)."""
+    out, scene = [], None
+    for cfg in stages:
+        out.append(scene)
+        st = type_of(cfg)
+        if st is None or (st.needs_input and st.keeps and scene is None):
+            scene = None
+        else:
+            kept = {f for f in scene if _group(f) in st.keeps} if st.needs_input and scene else set()
+            scene = frozenset(st.provides) | kept
+    return out
+
+
+def writers_of(path):
+    """Names of the stage types that write field ``path``."""
+    return [name for name, st in sorted(STAGE_TYPES.items()) if has_field(st.provides, path)]
+
+
+def earlier_stage(case, k, type_name):
+    """The nearest stage before stage ``k`` of type ``type_name`` whose output reaches stage
+    ``k`` (none of the stages between starts a new scene), or None."""
+    for cfg in reversed(case.stages[:k]):
+        if cfg.type == type_name:
+            return cfg
+        if not STAGE_TYPES[cfg.type].needs_input:
+            return None
+    return None
+
+
+def require_dimension(case, dimension, what, report):
+    """Report when the case's dimension is not ``dimension`` (``what`` says what the stage builds)."""
+    if case.dimension != dimension:
+        report("", f"{what} is {dimension}D; set dimension: {dimension} in the case (it is {case.dimension})")

@@ -20,7 +20,7 @@ from demcli import interrupts
 from demcli.config.schema import Bool, Float, Int, List, Map, Optional, Section, Str, Tagged, Vector
 from demcli.errors import InputError, StageError, StateError
 from demcli.progress import StopForecast, compile_notice
-from demcli.stages.base import StageType, register_stage
+from demcli.stages.base import ENGINE_KEEPS, ENGINE_OUTPUT, StageType, has_field, register_stage
 from demcli.threads import ThreadGovernor
 from demcli.state.fields import Field, register, register_group
 
@@ -70,6 +70,13 @@ MOTION = Tagged("mode", {
 
 FACES = ("x0", "x1", "y0", "y1", "z0", "z1")
 
+
+def _check_box(node, report):
+    for d in range(3):
+        if node.max[d] <= node.min[d]:
+            report(f"max.{d}", f"must be > min ({node.min[d]:g} m)", node.max[d])
+
+
 WALL = Tagged("type", {
     "plane": Section({
         "name": Str(default=None), "point": Vector(3, "m"), "normal": Vector(3, doc="into the domain"),
@@ -83,7 +90,7 @@ WALL = Tagged("type", {
         "name": Str(default="box"), "min": Vector(3, "m"), "max": Vector(3, "m"), "material": Str(),
         "open": List(Str(choices=list(FACES)), default=(), doc="faces left out, e.g. [z1]"),
         "motion": Map(MOTION, default={}, doc="motion per face name (x0 ... z1); others fixed"),
-    }),
+    }, check=_check_box),
     "cylinder": Section({
         "name": Str(default=None), "base": Vector(3, "m", doc="point on the axis (bottom)"),
         "axis": Vector(3, default=(0.0, 0.0, 1.0)), "radius": Float("m", min=0, min_inclusive=False),
@@ -255,6 +262,46 @@ def check_dynamics(node, report):
         for where, m in motions:
             if m.mode == "force" and m.weight and node.physics.gravity is None:
                 report(f"{where}.weight", "the wall's weight needs physics.gravity", m.weight)
+            _check_wall_mode(w.type, m, where, report)
+
+
+def _check_wall_mode(wall_type, motion, where, report):
+    """Modes a wall type takes: pressure for cylinders only, which take no servo or force;
+    a servo plane needs its area (box faces know theirs)."""
+    if wall_type == "cylinder" and motion.mode in ("servo", "force"):
+        report(f"{where}.mode", "a cylinder wall takes fixed, velocity or pressure", motion.mode)
+    elif wall_type != "cylinder" and motion.mode == "pressure":
+        report(f"{where}.mode", "mode pressure is for cylinder walls", motion.mode)
+    elif wall_type == "plane" and motion.mode == "servo" and motion.area is None:
+        report(f"{where}.area", "a servo plane needs its loaded area (only box faces know theirs)")
+
+
+def scene_check(cfg, case, k, scene, report):
+    """The stage's physics against its input scene, known from the earlier stages' outputs:
+    polyhedra take gravity, friction and damping only (no energy book-keeping, rolling
+    resistance, 2D or bonds); adaptive and contact damping are for polyhedra."""
+    if scene is None:
+        return
+    physics = cfg.physics
+    if not has_field(scene, "polyhedra/shape"):
+        for key in ("adaptive_damping", "contact_damping"):
+            if physics[key] not in (None, False):
+                report(f"physics.{key}", "is for polyhedral bodies only; the input holds spheres", physics[key])
+        return
+    for key in ("energy", "rolling_resistance"):
+        if physics[key]:
+            report(f"physics.{key}", "is for spheres; the input holds polyhedral bodies", physics[key])
+    if case.dimension == 2:
+        report("", "the input holds polyhedral bodies, which are 3D; the case has dimension 2")
+    if cfg.get("bonds") is not None or has_field(scene, "bonds/i"):
+        report("bonds" if cfg.get("bonds") is not None else "", "bonds join spheres; the input holds polyhedra")
+
+
+def config_inputs(cfg):
+    """Input fields a dem config reads besides its type's requires: bonds.from_phases the phase table."""
+    bonds = cfg.get("bonds")
+    return {"bonds.from_phases": ("phases/sphere", "phases/pair_model")} if bonds is not None and \
+        bonds.from_phases else {}
 
 
 def declared_effects(cfg, dimension):
@@ -370,11 +417,7 @@ def set_bond_models(ctx, bonds_cfg, system, groups=None):
     pairs, rows = [], []
     if bonds_cfg.get("from_phases"):
         pairs, rows, _ = phase_models(ctx, groups)
-    for k, b in enumerate(bonds_cfg.models):
-        for m in b.materials:
-            if m not in names:
-                raise InputError(f"stage {ctx.name}: bonds.models.{k}.materials: unknown material {m!r} "
-                                 f"(case materials: {', '.join(names)})")
+    for b in bonds_cfg.models:  # material names are checked at validation
         params = {key: b[key] for key in b.keys() if key not in ("model", "materials") and b[key] is not None}
         params = {key: (dict(v.to_dict()) if hasattr(v, "to_dict") else v) for key, v in params.items()}
         pairs.append(tuple(names.index(m) for m in b.materials))
@@ -497,16 +540,7 @@ def build_walls(cfg, case):
                       radius=np.array([r[4] for r in rows], float), material=np.array([r[5] for r in rows], np.int64),
                       control=np.array([r[6] for r in rows], np.int8), prm=np.array([r[7] for r in rows]),
                       v=np.array([r[8] for r in rows]), extent=np.array([r[9] for r in rows]))
-    cyl = walls.kind == W.CYLINDER
-    bad = [walls.name[i] for i in range(len(walls)) if (walls.control[i] == W.PRESSURE and not cyl[i]) or
-           (cyl[i] and walls.control[i] in (W.SERVO, W.FORCE))]
-    if bad:
-        raise InputError(f"walls {bad}: mode pressure is for cylinder walls; a cylinder takes fixed, velocity or "
-                         "pressure")
-    bad = [walls.name[i] for i in range(len(walls)) if walls.control[i] == W.SERVO and not walls.prm[i, W.W_AREA] > 0]
-    if bad:
-        raise InputError(f"servo walls {bad} need motion.area (only box faces know their area)")
-    return walls
+    return walls  # the modes each wall type takes are checked at validation (_check_wall_mode)
 
 
 def _is_polyhedral(groups):
@@ -960,5 +994,6 @@ def plan_summary(ctx_case, cfg, scene):
 
 register_stage(StageType(
     "dem", FIELDS, run, needs_input=True, requires=("bodies/x", "spheres/radius"), check=_check,
-    orders_particles=True,
+    orders_particles=True, provides=ENGINE_OUTPUT, keeps=ENGINE_KEEPS, config_requires=config_inputs,
+    case_check=scene_check,
     plan=plan_summary, doc="integrate the motion with the declared physics"))

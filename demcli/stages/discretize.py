@@ -34,8 +34,8 @@ import math
 import numpy as np
 
 from demcli.config.schema import Float, Section, Str
-from demcli.errors import InputError, StageError
-from demcli.stages.base import StageType, register_stage
+from demcli.errors import StageError
+from demcli.stages.base import StageType, earlier_stage, register_stage, require_dimension
 from demcli.state.fields import Field, register, register_group
 
 register_group("section", "Phases of a discretized 2D section (seed 001)", writer="stage discretize")
@@ -64,6 +64,20 @@ def _check(node, report):
     if node.aggregate.material == node.mastic.material:
         report("mastic.material", "must differ from aggregate.material (phases are told apart by material)",
                node.mastic.material)
+
+
+def _case_check(cfg, case, k, scene, report):
+    """A 2D case, and memory for the balls over the section of the polygons stage before
+    (a hexagonal cell is 2 sqrt(3) r^2)."""
+    from demcli.config.memory import check_memory
+    from demcli.stages.gradation import specimen_amount
+
+    require_dimension(case, 2, "a discretized section", report)
+    section = earlier_stage(case, k, "polygons")
+    if section is not None:
+        area = specimen_amount(section.specimen)[0]
+        check_memory(report, "ball_radius", area / (2.0 * math.sqrt(3.0) * cfg.ball_radius ** 2),
+                      f"the balls over the section of stage {section.name!r}", cfg.ball_radius)
 
 
 def group_disk_properties(group, centres, r, areal_density, n_group):
@@ -99,8 +113,6 @@ def run(ctx, cfg, state_in):
     from demcli.state.vtu import Snapshots
     from demcli.state.vtu_polygons import write_polygons_vtu
 
-    if ctx.case.dimension != 2:
-        raise InputError(f"stage {ctx.name}: a 2D section needs dimension: 2 in the case")
     pg = state_in.groups["polygons"]
     g = state_in.groups["gradation"]
     kind = int(np.asarray(pg["specimen_shape"]))
@@ -207,7 +219,8 @@ def run(ctx, cfg, state_in):
 
 
 register_stage(StageType(
-    "discretize", FIELDS, run, check=_check,
+    "discretize", FIELDS, run, check=_check, case_check=_case_check,
+    provides=("bodies/*", "spheres/*", "section/*", "records/*"), keeps=("gradation", "polygons"),
     requires=("polygons/vertex_start", "polygons/vertices", "polygons/class", "polygons/area",
               "polygons/specimen_shape", "polygons/specimen_size", "gradation/totals"),
     doc="hexagonal balls over a 2D section: aggregate clumps inside polygons, mastic, voids (seed 001)"))

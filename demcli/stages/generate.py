@@ -71,12 +71,18 @@ def _region_box(region):
     return b - [region.radius, region.radius, 0], b + [region.radius, region.radius, region.height]
 
 
-def _lattice(lo, hi, radii, planar):
-    """Simple cubic lattice, spacing 2.02 r_max, filled x fastest."""
-    a = 2.02 * radii.max()
+def _lattice_counts(lo, hi, a, planar):
+    """Sites along x, y, z of the simple cubic lattice of spacing ``a`` in the box lo-hi."""
     counts = [max(1, int(math.floor((hi[d] - lo[d]) / a))) for d in range(3)]
     if planar:
         counts[2] = 1
+    return counts
+
+
+def _lattice(lo, hi, radii, planar):
+    """Simple cubic lattice, spacing 2.02 r_max, filled x fastest."""
+    a = 2.02 * radii.max()
+    counts = _lattice_counts(lo, hi, a, planar)
     idx = np.arange(len(radii))
     if len(radii) > counts[0] * counts[1] * counts[2]:
         return None
@@ -85,6 +91,32 @@ def _lattice(lo, hi, radii, planar):
     pos[:, 1] = lo[1] + ((idx // counts[0]) % counts[1] + 0.5) * a
     pos[:, 2] = lo[2] + (idx // (counts[0] * counts[1]) + 0.5) * a if not planar else 0.5 * (lo[2] + hi[2])
     return pos
+
+
+def _envelope(cfg):
+    """Radius of a particle's bounding sphere in units of its drawn radius (1 for a sphere)."""
+    if cfg.clump is None:
+        return 1.0
+    t = np.array(cfg.clump.spheres, float)
+    return float(np.max(np.linalg.norm(t[:, :3], axis=1) + t[:, 3]))
+
+
+def _case_check(cfg, case, k, scene, report):
+    """What the case decides: 2D clumps, the lattice's room, and the memory of the particles."""
+    from demcli.config.memory import check_memory
+
+    planar = case.dimension == 2
+    if planar and cfg.clump is not None:
+        report("clump", "clumps are 3D only in this version; use dimension: 3")
+    if cfg.placement == "lattice":
+        lo, hi = _region_box(cfg.region)
+        a = 2.02 * cfg.radius.max * _envelope(cfg)
+        sites = int(np.prod(_lattice_counts(lo, hi, a, planar)))
+        if cfg.count > sites:
+            report("count", f"the region's lattice (spacing {a:.4g} m) has {sites} sites", cfg.count,
+                   "enlarge the region, lower the count or use placement: random")
+    members = len(cfg.clump.spheres) if cfg.clump is not None else 1
+    check_memory(report, "count", cfg.count * members, "the generated particles", cfg.count)
 
 
 def run(ctx, cfg, state_in):
@@ -106,8 +138,7 @@ def run(ctx, cfg, state_in):
         template = t
         if planar:
             raise StageError("clumps are 3D only in this version; use dimension: 3")
-    # the envelope radius used for placement
-    env = radii * (np.max(np.linalg.norm(template[:, :3], axis=1) + template[:, 3]) if template is not None else 1.0)
+    env = radii * _envelope(cfg)  # the envelope radius used for placement
     lo, hi = _region_box(cfg.region)
     if planar:
         lo[2] = hi[2] = 0.5 * (lo[2] + hi[2])
@@ -169,5 +200,6 @@ def describe(cfg, case):
 
 
 register_stage(StageType(
-    "generate", FIELDS, run, needs_input=False, check=_check, describe=describe,
+    "generate", FIELDS, run, needs_input=False, check=_check, describe=describe, case_check=_case_check,
+    provides=("bodies/*", "spheres/*"),
     doc="place spheres or rigid clumps without overlap in a region"))

@@ -22,7 +22,6 @@ import math
 import numpy as np
 
 from demcli.config.schema import Float, List, Optional, Section, Tagged, Vector
-from demcli.errors import InputError
 from demcli.stages.base import StageType, register_stage
 from demcli.state.fields import Field, register, register_group
 
@@ -177,10 +176,7 @@ def compute(cfg):
 def run(ctx, cfg, state_in):
     from demcli.state import RecordTable
 
-    res = compute(cfg)
-    if res["dim"] != ctx.case.dimension:
-        raise InputError(f"stage {ctx.name}: a {cfg.specimen.shape} specimen is {res['dim']}D but the case has "
-                         f"dimension {ctx.case.dimension}")
+    res = compute(cfg)  # its dimension is the case's (checked at validation)
     state = ctx.new_state()
     state.groups["bodies"] = _empty_bodies()
     state.groups["spheres"] = _empty_spheres()
@@ -215,6 +211,14 @@ def _empty_spheres():
             "material": np.zeros(0, np.int64)}
 
 
+def _case_check(cfg, case, k, scene, report):
+    """The specimen's dimension must be the case's."""
+    dim = specimen_amount(cfg.specimen)[1]
+    if dim != case.dimension:
+        report("specimen", f"a {cfg.specimen.shape} specimen is {dim}D but the case has dimension "
+               f"{case.dimension}")
+
+
 def describe(cfg, case):
     """One line for ``demcli check``: classes and totals."""
     res = compute(cfg)
@@ -224,4 +228,5 @@ def describe(cfg, case):
 
 
 register_stage(StageType("gradation", FIELDS, run, needs_input=False, check=_check, describe=describe,
+                         case_check=_case_check, provides=("bodies/*", "spheres/*", "gradation/*", "records/*"),
                          doc="sieve table, size classes and their target volumes or areas"))

@@ -36,7 +36,7 @@ import numpy as np
 
 from demcli.config.schema import Float, Int, Section, Str, Tagged
 from demcli.errors import InputError, StageError
-from demcli.stages.base import StageType, register_stage
+from demcli.stages.base import StageType, earlier_stage, register_stage, require_dimension
 from demcli.state.fields import Field, register, register_group
 
 register_group("polygons", "Aggregate polygons of a 2D section (seed 001)", writer="stage polygons")
@@ -80,6 +80,20 @@ def _check(node, report):
         report("vertices.max", f"must be >= vertices.min ({node.vertices.min})", node.vertices.max)
 
 
+def _case_check(cfg, case, k, scene, report):
+    """A 2D case, and the specimen of the gradation stage the classes come from."""
+    from demcli.stages.gradation import specimen_amount
+
+    require_dimension(case, 2, "a polygons section", report)
+    grading = earlier_stage(case, k, "gradation")
+    if grading is None:
+        return
+    mine, theirs = specimen_amount(cfg.specimen)[0], specimen_amount(grading.specimen)[0]
+    if not math.isclose(mine, theirs, rel_tol=1e-9):
+        report("specimen", f"its area {mine:.6g} m^2 differs from the {theirs:.6g} m^2 of stage {grading.name!r}; "
+               "give both stages the same specimen")
+
+
 def _specimen(cfg):
     from demcli.geometry.section2d import Specimen
 
@@ -90,8 +104,6 @@ def run(ctx, cfg, state_in):
     from demcli.geometry.section2d import place_polygons
     from demcli.state.vtu_polygons import write_outline_vtu, write_polygons_vtu
 
-    if ctx.case.dimension != 2:
-        raise InputError(f"stage {ctx.name}: polygons build a 2D section; set dimension: 2 in the case")
     g = state_in.groups["gradation"]
     spec = _specimen(cfg)
     s_grad = float(g["totals"][0])
@@ -162,6 +174,7 @@ def class_table(pl, lower, upper):
 
 
 register_stage(StageType(
-    "polygons", FIELDS, run, check=_check,
+    "polygons", FIELDS, run, check=_check, case_check=_case_check,
     requires=("gradation/class_lower", "gradation/class_upper", "gradation/class_amount", "gradation/totals"),
+    provides=("polygons/*", "records/*"), keeps=("bodies", "spheres", "gradation"),
     doc="random convex aggregate polygons placed without intersection in a 2D section (seed 001)"))

@@ -38,7 +38,7 @@ from demcli import interrupts
 from demcli.config.schema import Float, Int, List, Optional, Section, Str, Tagged
 from demcli.errors import InputError, StageError
 from demcli.stages import dem
-from demcli.stages.base import StageType, register_stage
+from demcli.stages.base import ENGINE_KEEPS, ENGINE_OUTPUT, StageType, register_stage
 from demcli.state.fields import Field, register, register_group
 
 register_group("bonded_specimen", "The prepared cylindrical specimen (seed 003)", writer="stage prepare")
@@ -94,11 +94,32 @@ PREPARE_FIELDS = {
 PHASES = ("expand", "equilibrium", "reduce", "grow", "bonded")
 
 
+def specimen_spheres(cfg):
+    """(count, nominal radius [m]) of a prepare config: one is given, the other follows from
+    the solid fraction of the cylinder."""
+    c = cfg.cylinder
+    vcyl = math.pi * c.radius ** 2 * c.height
+    v1 = 4.0 / 3.0 * math.pi
+    if cfg.radius is None:
+        return cfg.count, (cfg.solid_fraction * vcyl / (cfg.count * v1)) ** (1.0 / 3.0)
+    return int(round(cfg.solid_fraction * vcyl / (v1 * cfg.radius ** 3))), cfg.radius
+
+
 def _check_prepare(node, report):
+    from demcli.config.memory import check_memory
+
     if (node.count is None) == (node.radius is None):
         report("count", "give exactly one of count and radius (the other follows from solid_fraction)", node.count)
+        return
     if node.mass_scale != 1.0 and 2.0 ** round(math.log2(node.mass_scale)) != node.mass_scale:
         report("mass_scale", "must be a power of 2 so that scaling is exact", node.mass_scale)
+    n, r = specimen_spheres(node)
+    key = "count" if node.radius is None else "radius"
+    c = node.cylinder
+    if 2 * r >= min(c.radius, c.height):
+        report(key, f"spheres of radius {r:.4g} m do not fit a cylinder of radius {c.radius:.4g} m and height "
+               f"{c.height:.4g} m", node[key])
+    check_memory(report, key, n, "the specimen", node[key])
 
 
 def _node(**kw):
@@ -148,19 +169,8 @@ def run_prepare(ctx, cfg, state_in):
     base = np.array(c.base if c.base is not None else (0.0, 0.0, 0.0), float)
     vcyl = math.pi * R * R * H
     v1 = 4.0 / 3.0 * math.pi
-    if cfg.radius is None:
-        n = cfg.count
-        r = (cfg.solid_fraction * vcyl / (n * v1)) ** (1.0 / 3.0)
-    else:
-        r = cfg.radius
-        n = int(round(cfg.solid_fraction * vcyl / (v1 * r ** 3)))
-    if 2 * r >= min(R, H):
-        raise InputError(f"stage {ctx.name}: spheres of radius {r:.4g} m do not fit a cylinder of radius {R:.4g} m "
-                         f"and height {H:.4g} m")
+    n, r = specimen_spheres(cfg)  # that they fit the cylinder is checked at validation
     names = list(ctx.case.materials)
-    for key in ("material", "wall_material"):
-        if cfg[key] not in names:
-            raise InputError(f"stage {ctx.name}: {key}: unknown material {cfg[key]!r} (case: {', '.join(names)})")
     r0 = r * cfg.start_factor
     lo, hi = base - [R, R, 0.0], base + [R, R, H]
     pos, placed = place_random(ctx.rng, lo, hi, np.full(n, r0), cylinder=(base[0], base[1], R))
@@ -266,6 +276,8 @@ def run_prepare(ctx, cfg, state_in):
 
 register_stage(StageType(
     "prepare", PREPARE_FIELDS, run_prepare, needs_input=False, check=_check_prepare,
+    provides=("bodies/*", "spheres/*", "contacts/*", "energy/*", "records/*", "bonds/*", "bond_models/*",
+              "bonded_specimen/*"),
     doc="seed 003: a bonded cylindrical specimen of single-size spheres at a low isotropic stress"))
 
 
@@ -423,4 +435,5 @@ for _name, _unit, _doc in [("sigma_1", "Pa", "axial stress applied"), ("sigma_3"
 
 register_stage(StageType(
     "creep", _creep_fields(), run_creep, needs_input=True, requires=("bonded_specimen/radius", "bonds/i"),
-    check=_check_creep, doc="seed 003: uniaxial or triaxial creep of a bonded specimen between frictionless platens"))
+    provides=ENGINE_OUTPUT + ("creep_result/*",), keeps=ENGINE_KEEPS + ("bonded_specimen",),
+    case_check=dem.scene_check, check=_check_creep, doc="seed 003: uniaxial or triaxial creep of a bonded specimen between frictionless platens"))

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from demcli import run_case
-from demcli.errors import StageError
+from demcli.errors import ConfigError, StageError
 from demcli.geometry import convex_hull, sieve_size
 from demcli.stages.ballast_library import build_library, read_library, write_library
 from demcli.state import read_state
@@ -140,6 +140,7 @@ def test_too_small_a_library_is_a_clear_error(tmp_path):
 
 
 def test_a_class_below_the_library_is_a_clear_error(tmp_path):
-    # 10 % through the 16 mm sieve: a 0-16 mm class, which a library does not cover
-    with pytest.raises(StageError, match="0-16 mm .* no particles for it .*min_size"):
+    # 10 % through the 16 mm sieve: a 0-16 mm class, which a library does not cover: refused
+    # when the case is validated, before any stage runs
+    with pytest.raises(ConfigError, match="0-16 mm .* no particles for it .*min_size"):
         run_case(tiny_case(tmp_path, passing="10, 10, 100, 100"), out=tmp_path / "run", quiet=True)

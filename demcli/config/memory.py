@@ -1,0 +1,66 @@
+"""The memory a stage's particles will take, against what this machine has, checked at validation.
+
+A stage that makes many particles (``generate`` with ``count: 100000000``) would otherwise
+pass ``demcli check`` and fail minutes into ``demcli run`` on an allocation. The estimate is
+generous (:data:`BYTES_PER_SPHERE`), so a case refused here could not have run.
+"""
+
+import os
+
+from demcli.config.schema import NOVALUE
+
+BYTES_PER_SPHERE = 3072
+"""Bytes per sphere of a scene the engine integrates, rounded up: the sphere's arrays and its
+body's (position, velocity, orientation, spin, force, torque, mass, inertia, ids: ~0.4 kB),
+neighbour-list pairs with their force and friction history (up to ~12 per sphere, ~0.13 kB
+each: ~1.6 kB), and the copies kept for the last good state and the snapshots (~0.6 kB)."""
+
+BYTES_PER_POLYHEDRON = 8192
+"""Bytes per polyhedron of a ballast library, rounded up: up to ~60 vertices and their faces'
+CSR tables (~3 kB), its shape indices, and the hull and sieve work arrays while it is built."""
+
+
+def _cgroup_limit():
+    """The memory limit of this process's cgroup (v2), or None."""
+    try:
+        with open("/sys/fs/cgroup/memory.max", encoding="ascii") as f:
+            text = f.read().strip()
+    except OSError:
+        return None
+    return int(text) if text.isdigit() else None
+
+
+def machine_memory():
+    """Bytes of memory this process can use: the machine's physical memory, or less where an
+    address-space limit or a cgroup says so; None where unknown."""
+    limits = [_cgroup_limit()]
+    try:
+        limits.append(os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE"))
+    except (ValueError, OSError, AttributeError):
+        pass
+    try:
+        import resource
+
+        soft = resource.getrlimit(resource.RLIMIT_AS)[0]
+        limits.append(None if soft == resource.RLIM_INFINITY else soft)
+    except (ImportError, ValueError, OSError):
+        pass
+    limits = [v for v in limits if v is not None and v > 0]
+    return min(limits) if limits else None
+
+
+def _gib(n_bytes):
+    return f"{n_bytes / 2 ** 30:.3g} GiB"
+
+
+def check_memory(report, key, count, what, value=NOVALUE, kind="spheres", bytes_each=BYTES_PER_SPHERE):
+    """Report at ``key`` when ``count`` particles (``what``: where they come from; ``kind``:
+    spheres or polyhedra, ``bytes_each`` apiece) need more memory than this machine has,
+    naming the estimate and the machine's figure."""
+    available = machine_memory()
+    need = float(count) * bytes_each
+    if available is None or need <= available:
+        return
+    report(key, f"{what}: about {float(count):.3g} {kind} need an estimated {_gib(need)} of memory "
+                f"({bytes_each} bytes each), more than this machine's {_gib(available)}", value,
+           "make the scene smaller (fewer or larger particles)")
