@@ -16,13 +16,17 @@ import numpy as np
 
 from demcli.errors import InputError
 from demcli.state.atomic import atomic_write_text
-from demcli.state.records import plot_lines
+from demcli.state.plots import save_png
+from demcli.state.records import column_figure, column_spec
 
 # the papers' figures: record file stem -> [(x column, y columns), ...]
 SEED_FIGURES = {"vibrate_cycles": [("cycle", ["bulk_density", "void_ratio"])],          # seed 002, Figs. 9-10
                 "sleeper_settlement": [("cycle", ["settlement"])],                       # seed 002, Fig. 12
                 "creep_creep": [("time", ["axial_strain"]),                              # seed 003, Fig. 3
                                 ("distortional_strain", ["volumetric_strain"])]}         # seed 003, Figs. 4-5
+# what the papers' figures print besides the columns' own labels: record file stem -> style
+SEED_STYLE = {"vibrate_cycles": {"xlabel": "Vibration cycle",                           # seed 002
+                                 "targets": {"bulk_density": 1550.0}}}  # kg/m^3: where the plate is removed
 
 
 def _columns(header):
@@ -133,7 +137,34 @@ def _overlay(out, stem, tables, xcol, ycols, earlier, used):
         csv_path = out / f"{stem}_{col}.csv"
         atomic_write_text(csv_path, "\n".join(lines) + "\n")
         png = out / f"{stem}_{col}.png"
-        plot_lines(png, series, xlabel=f"{xcol} [{units[xcol]}]" if units[xcol] else xcol,
-                   ylabel=f"{col} [{units[col]}]" if units[col] else col, title=stem, marker="o")
+        save_png(overlay_figure(stem, series, xcol, col, units), png)
         written += [csv_path, png]
     return written
+
+
+def overlay_figure(stem, series, xcol, col, units):
+    """The Figure of column ``col`` against ``xcol`` of record ``stem``, one line per entry of
+    ``series`` (``{name: (x, y)}`` in the units ``units`` of the CSV): labelled as the record's own
+    plots are (the words and display units the stages declare), with the seed figure's axis words
+    and target line (:data:`SEED_STYLE`). None without matplotlib."""
+    style = SEED_STYLE.get(stem, {})
+    spec = _spec(stem, col, units[col])
+    targets = [(spec, v) for c, v in style.get("targets", {}).items() if c == col]
+    lines = [(name, spec, xv, yv) for name, (xv, yv) in series.items()]
+    return column_figure(_spec(stem, xcol, units[xcol]), lines, targets=targets, xlabel=style.get("xlabel"),
+                         title=stem)
+
+
+def _spec(stem, col, unit):
+    """How ``col`` of the record file ``stem`` (``<stage>_<table>``, either may hold '_') is shown:
+    the declaration for the longest table name the stem ends with, else the general one."""
+    from demcli.stages.base import load_stage_types
+
+    load_stage_types()  # the stage modules declare their columns
+    parts = stem.split("_")
+    general = column_spec(col, unit)
+    for k in range(1, len(parts)):
+        spec = column_spec(col, unit, "_".join(parts[k:]))
+        if spec != general:
+            return spec
+    return general

@@ -125,14 +125,15 @@ class StageContext:
         write_state(self.lastgood_path, st)
         raise StageError(message, state_file=self.lastgood_path)
 
-    def write_records(self, table, x, ys, logy=False, suffix=None, logx=False):
-        """CSV of a record table and a PNG of ``ys`` against ``x`` in ``records/``."""
+    def write_records(self, table, x, ys, logy=False, suffix=None, logx=False, **style):
+        """CSV of a record table and a PNG of ``ys`` against ``x`` in ``records/`` (``style``:
+        more :meth:`RecordTable.figure` keywords, e.g. ``targets``, ``xlabel``)."""
         folder = self.runner.run_dir / "records"
         folder.mkdir(parents=True, exist_ok=True)
         stem = f"{self.name}_{table.name}"
         table.write_csv(folder / f"{stem}.csv")
         png = folder / f"{stem}{'_' + suffix if suffix else ''}.png"
-        table.plot(png, x, ys, logx=logx, logy=logy, title=f"{self.runner.name}: {self.name}")
+        table.plot(png, x, ys, logx=logx, logy=logy, title=f"{self.runner.name}: {self.name}", **style)
 
 
 class Runner:

@@ -20,7 +20,7 @@ curve departs from its own smooth trend (single rearrangements under the sleeper
 lower bound on the scatter between realisations, which also differ in their initial packing.
 
 ``response`` reads ``records/vibrate_dem.csv`` and ``records/sleeper_dem.csv`` (the dem records,
-``records_per_cycle`` samples per load cycle, 4 in the cases) and fits, per load cycle N (the
+``records_per_cycle`` samples per load cycle: 4 in the runs these docs report, 20 by default since) and fits, per load cycle N (the
 samples with N - 1 < cycle <= N), the device's height z(phase) = m + c cos 2 pi phase + s sin
 2 pi phase by least squares (phase = cycle - (N - 1); the load is F_min at phase 0 and 1, F_max
 at 0.5), with the fit the stages use for their own ``swing`` and ``lag`` columns (runs made

@@ -41,6 +41,15 @@ from demcli.config.schema import Float, Int, Optional, Section, Str
 from demcli.errors import StageError
 from demcli.stages import asphalt_common  # noqa: F401  (registers the seeds and aggregates groups)
 from demcli.stages.base import StageType, earlier_stage, register_stage
+from demcli.state.records import describe_column
+
+for _name, _label, _doc in [("target", "Target share", "mass percent of the aggregate in the class, as asked"),
+                           ("first", "First-round share", "mass percent after the first carving, before adjusting"),
+                           ("achieved", "Achieved share", "mass percent of the carved aggregates")]:
+    describe_column(_name, _label, "%", table="classes", doc=_doc)
+describe_column("round", "Adjustment round", integer=True, table="adjust", doc="gradation adjustment round")
+describe_column("max_error", "Largest class error", "%", table="adjust",
+                doc="largest relative error of a class's mass share")
 
 FIELDS = {
     "lattice": Section({

@@ -52,6 +52,14 @@ from demcli.stages import dem
 from demcli.stages import asphalt_common  # noqa: F401  (registers the seeds and aggregates groups)
 from demcli.stages.base import ENGINE_KEEPS, ENGINE_OUTPUT, StageType, register_stage
 from demcli.state.fields import Field, register, register_group
+from demcli.state.records import describe_column
+
+for _ax in "xyz":
+    describe_column(f"stress_{_ax}", f"Stress {_ax}", "Pa", "kPa", 1e-3, table="dem",
+                    doc=f"mean normal force on the two {_ax} faces over the face area (compression positive)")
+    for _end in "01":
+        describe_column(f"stress_{_ax}{_end}", f"Stress {_ax}{_end}", "Pa", "kPa", 1e-3, table="dem",
+                        doc=f"servo face {_ax}{_end}: its force over its current area (compression positive)")
 
 register_group("compaction", "Summary of a compact stage (seed 000): porosity before and after, final box",
                writer="stage compact")

@@ -28,6 +28,10 @@ from demcli.config.schema import Float, Int, Section, Str, Tagged, Vector
 from demcli.errors import InputError, StageError
 from demcli.stages import asphalt_common  # noqa: F401  (registers the seeds and aggregates groups)
 from demcli.stages.base import StageType, earlier_stage, register_stage, require_dimension
+from demcli.state.records import describe_column
+
+describe_column("share", "Mass share", "%", table="seeds", doc="mass percent of the aggregate in the class")
+describe_column("volume_share", "Volume share", "%", table="seeds", doc="percent of the seed spheres' volume")
 
 REGION = Section({"min": Vector(3, "m", doc="lower corner"), "max": Vector(3, "m", doc="upper corner")},
                  doc="box the spheres are placed in (the carving region)")

@@ -45,6 +45,14 @@ import numpy as np
 from demcli.config.schema import Bool, Float, Int, Optional, Section, Str, Vector
 from demcli.errors import StageError
 from demcli.stages.base import StageType, earlier_stage, register_stage
+from demcli.state.records import describe_column
+
+for _name, _label, _unit, _table, _doc in [
+        ("target", "Target passing", "%", "gradation_check", "mass percent passing the sieve, as asked"),
+        ("achieved", "Achieved passing", "%", "gradation_check", "mass percent passing, sieving the drawn set"),
+        ("target", "Target volume", "cm^3", "classes", "solid volume of the class, as asked"),
+        ("achieved", "Achieved volume", "cm^3", "classes", "solid volume of the class drawn")]:
+    describe_column(_name, _label, _unit, table=_table, doc=_doc)
 
 
 def _check(node, report):

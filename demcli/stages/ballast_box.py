@@ -45,6 +45,7 @@ from demcli.errors import InputError
 from demcli.stages import dem
 from demcli.stages.base import ENGINE_KEEPS, ENGINE_OUTPUT, StageType, register_stage
 from demcli.state.fields import Field, register, register_group
+from demcli.state.records import describe_column
 
 register_group("bed", "Ballast bed measures at the end of a ballast box stage (seed 002)",
                writer="stages deposit, vibrate, sleeper")
@@ -55,7 +56,27 @@ for _name, _unit, _doc in [("height", "m", "bed height h used for the bulk densi
                            ("particle_mass", "kg", "mass of the ballast particles")]:
     register(Field(f"bed/{_name}", "f", (), _unit, _doc, writer="stages deposit, vibrate, sleeper"))
 
+describe_column("height", "Bed height", "m", "mm", 1e3, table="dem", doc="bed height h used for the bulk density")
+describe_column("bulk_density", "Bulk density", "kg/m^3", "g/cm^3", 1e-3,
+                doc="particle mass / (box floor area x bed height)")
+describe_column("void_ratio", "Void ratio", doc="porosity / (1 - porosity)")
+describe_column("cycle", "Load cycle", integer=True,
+                doc="load cycles since the cycles began: whole in the per-cycle tables (each at its end, "
+                    "load at F_min), fractional in the dem tables (negative while settling)")
+describe_column("cycle", "Sleeper cycle", integer=True, table="settlement", doc="sleeper load cycles")
+describe_column("plate", "Plate height", "m", "mm", 1e3, doc="height z of the plate's centre (up positive)")
+describe_column("sleeper", "Sleeper height", "m", "mm", 1e3, doc="height z of the sleeper's centre (up positive)")
+describe_column("settlement", "Settlement", "m", "mm", 1e3,
+                doc="accumulated sleeper settlement: its descent since cycle 0, both at F_min (down positive)")
+describe_column("swing", "Swing", "m", "mm", 1e3,
+                doc="peak-to-peak height of a sinusoid fitted to the device's height over the cycle")
+describe_column("lag", "Lag", display="cycle",
+                doc="how far the device's lowest point comes after the peak load, in cycles, in [-0.5, 0.5)")
+
 CARRIED = ("gradation", "library")  # groups passed from the input to the output
+VIBRATION_CYCLE = "Vibration cycle"  # the x axis of the vibrate stage's figures (seed 002, Figs. 9-10)
+
+RECORDS_PER_CYCLE = 20  # default dem records per load cycle: a smooth trace of the loading device
 
 LOAD = Section({
     "min": Float("N", min=0, default=0.0, doc="force at the start of each cycle (besides the actor's weight)"),
@@ -73,7 +94,8 @@ def _dem_fields():
                            doc="time step as a fraction of the critical step"),
     }, default={}, doc="the stage length follows from the cycles")
     f.pop("stop")
-    f["records_per_cycle"] = Int(min=1, default=4, doc="dem records per load cycle")
+    f["records_per_cycle"] = Int(min=1, default=RECORDS_PER_CYCLE,
+                                 doc="dem records per load cycle (their time plots resolve the cycle)")
     return f
 
 
@@ -296,6 +318,7 @@ def _cyclic(ctx, cfg, state_in, actor, measure, columns, stop=None, finish_extra
                             "swing": float(resp["swing"][j]) if j is not None else math.nan,
                             "lag": float(resp["lag"][j]) if j is not None else math.nan})
         cyc.to_state(state)
+        ctx_.write_records(table, x="cycle", ys=[actor], suffix=actor)  # the device's trace, cycle by cycle
         if len(resp["lag"]):
             lag = float(np.median(resp["lag"]))
             msg = (f"{actor} response: lowest {lag:+.2f} cycle after the peak load, swing "
@@ -377,8 +400,11 @@ def run_vibrate(ctx, cfg, state_in):
         h = float(system.x[b, 2]) - half - lo[2]
         meas = bed_measures(mass, rho_s, area, h)
         state.groups["bed"] = _bed_group(meas)
-        ctx_.write_records(cyc, x="cycle", ys=["bulk_density"], suffix="density")
-        ctx_.write_records(cyc, x="cycle", ys=["void_ratio"], suffix="void_ratio")
+        rho_t = cfg.target_density  # the target line on both figures (void ratio e = rho_s / rho_b - 1)
+        for col, suffix, target in (("bulk_density", "density", rho_t),
+                                    ("void_ratio", "void_ratio", rho_t and rho_s / rho_t - 1.0)):
+            ctx_.write_records(cyc, x="cycle", ys=[col], suffix=suffix, xlabel=VIBRATION_CYCLE,
+                               targets={col: target} if target is not None else None)
         rows = cyc.to_arrays()
         if len(rows["cycle"]):
             ctx_.log(f"bulk density {rows['bulk_density'][0] / 1e3:.4g} -> {rows['bulk_density'][-1] / 1e3:.4g} g/cm^3 "

@@ -38,6 +38,9 @@ from demcli.config.schema import Bool, Float, Optional, Section, Str
 from demcli.errors import InputError
 from demcli.stages.base import StageType, earlier_stage, register_stage
 from demcli.state.fields import Field, register, register_group
+from demcli.state.records import describe_column
+
+describe_column("balls_mean", "Balls per clump", table="classes", doc="mean number of balls in a clump of the class")
 
 WRITER = "stage clumpify"
 register_group("clumps", "Clumps of spheres made from polyhedral particles, one row per body", writer=WRITER)

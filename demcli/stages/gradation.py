@@ -24,6 +24,7 @@ import numpy as np
 from demcli.config.schema import Float, List, Optional, Section, Tagged, Vector
 from demcli.stages.base import StageType, register_stage
 from demcli.state.fields import Field, register, register_group
+from demcli.state.records import describe_column
 
 register_group("gradation", "Gradation targets: sieves, size classes and their amounts", writer="stage gradation")
 for _name, _kind, _dims, _unit, _doc in [
@@ -36,6 +37,12 @@ for _name, _kind, _dims, _unit, _doc in [
         ("class_count", "f", ("n_class",), "1", "estimated particle count of each class"),
         ("totals", "f", ("n_total",), "m^3 or m^2", "specimen, solids or aggregate, voids, mastic amounts")]:
     register(Field(f"gradation/{_name}", _kind, _dims, _unit, _doc, writer="stage gradation"))
+
+describe_column("sieve", "Sieve size", "mm", ticks="values", doc="square-hole sieve aperture")
+describe_column("passing", "Passing", "%", doc="mass percent passing the sieve")
+describe_column("lower", "Class lower size", "mm", ticks="values", doc="lower sieve of the size class")
+describe_column("upper", "Class upper size", "mm", ticks="values", doc="upper sieve of the size class")
+describe_column("share", "Class share", "%", table="classes", doc="mass percent of the aggregate in the class")
 
 TOTALS = ("specimen", "aggregate", "voids", "mastic")
 

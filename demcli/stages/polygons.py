@@ -38,6 +38,10 @@ from demcli.config.schema import Float, Int, Section, Str, Tagged
 from demcli.errors import InputError, StageError
 from demcli.stages.base import StageType, earlier_stage, register_stage, require_dimension
 from demcli.state.fields import Field, register, register_group
+from demcli.state.records import describe_column
+
+describe_column("target", "Target area", "mm^2", table="classes", doc="aggregate area of the class, as asked")
+describe_column("placed", "Placed area", "mm^2", table="classes", doc="area of the polygons placed in the class")
 
 register_group("polygons", "Aggregate polygons of a 2D section (seed 001)", writer="stage polygons")
 for _name, _kind, _dims, _unit, _doc in [

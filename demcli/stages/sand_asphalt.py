@@ -40,6 +40,21 @@ from demcli.errors import InputError, StageError
 from demcli.stages import dem
 from demcli.stages.base import ENGINE_KEEPS, ENGINE_OUTPUT, StageType, register_stage
 from demcli.state.fields import Field, register, register_group
+from demcli.state.records import describe_column
+
+for _name, _label, _doc in [
+        ("axial_strain", "Axial strain", "e_a = h / h0 - 1 of the platens' distance (tension positive, as the seed)"),
+        ("radial_strain", "Radial strain", "e_r = r / r0 - 1 (tension positive)"),
+        ("volumetric_strain", "Volumetric strain", "e_v = e_a + 2 e_r (dilation positive)"),
+        ("distortional_strain", "Distortional strain", "e_d = |2/3 (e_a - e_r)|")]:
+    describe_column(_name, _label, display="%", scale=100.0, table="creep", doc=_doc)
+for _name, _label, _table, _doc in [
+        ("axial_stress", "Axial stress", "creep", "top platen's force over the specimen's section (compression "
+                                                  "positive)"),
+        ("confining_stress", "Confining stress", "creep", "membrane pressure (0 uniaxial)"),
+        ("isotropic_stress", "Isotropic stress", "prepare", "contact virial over the cylinder volume")]:
+    describe_column(_name, _label, "Pa", "kPa", 1e-3, table=_table, doc=_doc)
+describe_column("steps", "Steps", integer=True, table="prepare", doc="time steps cycled so far (cumulative)")
 
 register_group("bonded_specimen", "The prepared cylindrical specimen (seed 003)", writer="stage prepare")
 for _name, _unit, _doc in [("radius", "m", "specimen (cylinder) radius"),

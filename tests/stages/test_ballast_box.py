@@ -12,17 +12,28 @@ from click.testing import CliRunner
 from demcli import run_case
 from demcli.cli import cli
 from demcli.compare import read_record
-from demcli.state import read_state
+from demcli.state import RecordTable, read_state
 
 ROOT = Path(__file__).resolve().parents[2]
 SMOKE = ROOT / "cases" / "smoke" / "ballast_box.yaml"
 sys.path.insert(0, str(ROOT / "tests" / "engine"))
+TARGET = 2500.0  # the smoke case's plate-removal density [kg/m^3], beyond its bed: drawn, never reached
+FIGURES = {}  # the chain's figures: (table, y columns) -> matplotlib Figure
 
 
 @pytest.fixture(scope="module")
 def chain(tmp_path_factory):
     out = tmp_path_factory.mktemp("ballast_box")
-    run_case(SMOKE, out=out, quiet=True)
+    figure = RecordTable.figure
+
+    def keep(self, x, ys, **style):
+        fig = figure(self, x, ys, **style)
+        FIGURES[(self.name, tuple([ys] if isinstance(ys, str) else ys))] = fig
+        return fig
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(RecordTable, "figure", keep)
+        run_case(SMOKE, out=out, quiet=True)
     return out
 
 
@@ -71,7 +82,7 @@ def test_vibrate_records_density_per_cycle_under_the_plate(chain):
     # and the plate moved along z only: its x, y are the box centre, its attitude as laid
     assert st["bodies/x"][plate, 0] == pytest.approx(0.12, abs=1e-12)
     assert st["bodies/x"][plate, 1] == pytest.approx(0.075, abs=1e-12)
-    # and a load cycle compacts the loose bed (measured 0.85 -> 0.99 g/cm^3)
+    # and a load cycle compacts the loose bed (measured 0.86 -> 1.10 g/cm^3)
     assert rows["bulk_density"][-1] > rows["bulk_density"][0]
     # and the plate's response in the cycle (swing, lag of its lowest point behind the peak load)
     # is the fit of its height over the cycle's dem records; none before the cycles start
@@ -126,11 +137,52 @@ def test_sleeper_fills_the_shoulders_and_records_settlement(chain):
     assert list(rows["cycle"]) == [0, 1] and rows["settlement"][0] == 0.0
     assert rows["settlement"][-1] == pytest.approx(rows["sleeper"][0] - rows["sleeper"][-1], rel=1e-12)
     assert rows["sleeper"][-1] == pytest.approx(float(st["bodies/x"][sl, 2]), rel=1e-12)
-    # the sleeper sinks under the cyclic load (measured 3.7 mm after one cycle)
+    # the sleeper sinks under the cyclic load (measured 2.5 mm after one cycle)
     assert rows["settlement"][-1] > 0.0
     _check_response(rows, _csv(chain / "records" / "sleeper_dem.csv"), "sleeper")
     assert (chain / "records" / "sleeper_settlement.png").exists()
     assert any((chain / "sleeper").glob("*.pvd"))
+
+
+def test_cyclic_stages_sample_each_load_cycle_at_least_20_times(chain):
+    from demcli.stages.ballast_box import SLEEPER, VIBRATE
+
+    # Given the default of the vibrate and sleeper stages (the smoke case sets none)
+    assert VIBRATE["records_per_cycle"].default >= 20 and SLEEPER["records_per_cycle"].default >= 20
+    # Then each load cycle of the dem records holds that many rows (before: 4, a zig-zag trace)
+    for stage in ("vibrate", "sleeper"):
+        cycle = _csv(chain / "records" / f"{stage}_dem.csv")["cycle"]
+        assert np.sum((cycle > 1e-9) & (cycle <= 1 + 1e-9)) == VIBRATE["records_per_cycle"].default
+
+
+def test_ballast_figures_print_the_papers_axes(chain):
+    pytest.importorskip("matplotlib")
+    # Given the chain's figures: bulk density and void ratio per vibration cycle
+    ax = FIGURES[("cycles", ("bulk_density",))].axes[0]
+    rows = _csv(chain / "records" / "vibrate_cycles.csv")
+    # Then the axes are the paper's words and units, whole cycles, a marker per cycle
+    assert (ax.get_xlabel(), ax.get_ylabel()) == ("Vibration cycle", "Bulk density (g/cm³)")
+    assert all(float(v).is_integer() for v in ax.get_xticks())
+    density, target = ax.get_lines()
+    np.testing.assert_allclose(density.get_ydata(), rows["bulk_density"] * 1e-3)
+    assert density.get_marker() == "o"
+    # and the stage's target density is the dashed line, on the void ratio figure as e = rho_s / rho_t - 1
+    assert target.get_label() == "Target 2.5 g/cm³" and np.allclose(target.get_ydata(), 2.5)
+    ax = FIGURES[("cycles", ("void_ratio",))].axes[0]
+    assert ax.get_ylabel() == "Void ratio" and np.allclose(ax.get_lines()[1].get_ydata(), 2600.0 / TARGET - 1.0)
+    # and the settlement in mm per sleeper cycle
+    ax = FIGURES[("settlement", ("settlement",))].axes[0]
+    assert (ax.get_xlabel(), ax.get_ylabel()) == ("Sleeper cycle", "Settlement (mm)")
+    np.testing.assert_allclose(ax.get_lines()[0].get_ydata(),
+                               _csv(chain / "records" / "sleeper_settlement.csv")["settlement"] * 1e3)
+    # and the sleeper's height through the cycles, every dem record
+    ax = FIGURES[("dem", ("sleeper",))].axes[0]
+    assert (ax.get_xlabel(), ax.get_ylabel()) == ("Load cycle", "Sleeper height (mm)")
+    assert (chain / "records" / "sleeper_dem_sleeper.png").exists()
+    assert (chain / "records" / "vibrate_dem_plate.png").exists()
+    # and the kinetic energy on its log axis leaves out the zero it starts from
+    ax = FIGURES[("dem", ("kinetic",))].axes[0]
+    assert ax.get_yscale() == "log" and np.all(np.asarray(ax.get_lines()[0].get_ydata()) > 0)
 
 
 def test_cycle_timing_gives_whole_cycles_of_whole_records():
@@ -252,6 +304,24 @@ def test_compare_overlays_the_runs_records(chain, tmp_path):
     # and a folder without records is a clear input error (exit 2)
     bad = CliRunner().invoke(cli, ["compare", str(tmp_path / "cmp")])
     assert bad.exit_code == 2 and "not a run folder" in bad.output
+
+
+def test_compare_figures_read_as_the_stages_own(chain):
+    pytest.importorskip("matplotlib")
+    from demcli.compare import overlay_figure, read_record
+
+    # Given the records of a run, when compare draws the seed figures, then they carry the stages'
+    # words and display units, the seed figure's axis words and its 1.55 g/cm^3 line
+    data, units = read_record(chain / "records" / "vibrate_cycles.csv")
+    ax = overlay_figure("vibrate_cycles", {"a": (data["cycle"], data["bulk_density"])}, "cycle", "bulk_density",
+                        units).axes[0]
+    assert (ax.get_xlabel(), ax.get_ylabel()) == ("Vibration cycle", "Bulk density (g/cm³)")
+    assert [ln.get_label() for ln in ax.get_lines()] == ["a", "Target 1.55 g/cm³"]
+    data, units = read_record(chain / "records" / "sleeper_settlement.csv")
+    ax = overlay_figure("sleeper_settlement", {"a": (data["cycle"], data["settlement"])}, "cycle", "settlement",
+                        units).axes[0]
+    assert (ax.get_xlabel(), ax.get_ylabel()) == ("Sleeper cycle", "Settlement (mm)")
+    assert all(float(v).is_integer() for v in ax.get_xticks())
 
 
 def test_compare_keeps_the_curves_of_runs_whose_folders_are_gone(chain, tmp_path):
