@@ -2,7 +2,9 @@
 
 A State is ``meta`` (scalars) + ``groups`` (``{"bodies": {"x": array, ...}, ...}``) +
 ``group_attrs``. Stages pass States to each other through HDF5 files written by
-:func:`write_state` and read back, validated, by :func:`read_state`. See docs/state.md.
+:func:`write_state` and read back by :func:`read_state`, validated: the field registry's
+dtypes, shapes and value rules (:mod:`demcli.state.rules`) and the checksums of datasets and
+attributes. See docs/state.md.
 
 VTU export lives in :mod:`demcli.state.vtu` (imports meshio; not imported here).
 """

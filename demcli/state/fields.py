@@ -20,6 +20,7 @@ from dataclasses import dataclass, field as _dc_field
 import numpy as np
 
 from demcli.errors import StateError
+from demcli.state import rules as _rules
 
 SCHEMA_VERSION = 1
 """Current schema version; bump on any incompatible change (see docs/state.md)."""
@@ -50,6 +51,10 @@ class Field:
     the integer values must lie in (``spheres/body`` indexes ``n_b``); dtype: the dtype
     stored on disk (default float64 / int64 / uint64 / bool / vlen utf-8); attr: stored
     as an HDF5 attribute of the group instead of a dataset.
+
+    Value rules, checked when a state is read (:mod:`demcli.state.rules`): finite: no NaN
+    or infinity; positive: every value > 0; unit_rows: each row a unit vector; unique: no
+    value twice.
     """
 
     path: str
@@ -63,6 +68,10 @@ class Field:
     index_of: str | None = None
     dtype: str | None = None
     attr: bool = False
+    finite: bool = False
+    positive: bool = False
+    unit_rows: bool = False
+    unique: bool = False
 
     def __post_init__(self):
         kind = _KIND_ALIASES.get(self.kind, self.kind)
@@ -90,6 +99,15 @@ class Field:
         if not self.dims:
             return "scalar"
         return "(" + ", ".join(str(d) for d in self.dims) + ")"
+
+    @property
+    def rules_text(self) -> str:
+        """The value rules in words, for docs/state.md (e.g. 'finite, > 0')."""
+        rules = [name for name, on in (("finite", self.finite), ("> 0", self.positive),
+                                       ("unit rows", self.unit_rows), ("unique", self.unique)) if on]
+        if self.index_of:
+            rules.append(f"< {self.index_of}")
+        return ", ".join(rules)
 
     def describe(self) -> str:
         """Short text used in error messages: unit, doc and writer."""
@@ -171,67 +189,69 @@ _reg("meta", "machine", "str", (), "", "CPU model, the CPU numba compiled for, O
 
 register_group("bodies", "Rigid bodies (clumps); a single sphere is a body with one sphere",
                required=True)
-_reg("bodies", "x", "f", ("n_b", 3), "m", "centre of mass, world frame")
-_reg("bodies", "v", "f", ("n_b", 3), "m/s", "velocity of the centre of mass")
-_reg("bodies", "q", "f", ("n_b", 4), "1", "unit quaternion (w, x, y, z), body to world")
-_reg("bodies", "omega", "f", ("n_b", 3), "rad/s", "angular velocity, world frame")
-_reg("bodies", "mass", "f", ("n_b",), "kg", "mass")
-_reg("bodies", "inertia", "f", ("n_b", 3), "kg m^2", "principal moments of inertia, body frame")
-_reg("bodies", "id", "i", ("n_b",), "", "stable body id (survives deletion and reordering)")
+_reg("bodies", "x", "f", ("n_b", 3), "m", "centre of mass, world frame", finite=True)
+_reg("bodies", "v", "f", ("n_b", 3), "m/s", "velocity of the centre of mass", finite=True)
+_reg("bodies", "q", "f", ("n_b", 4), "1", "unit quaternion (w, x, y, z), body to world", finite=True, unit_rows=True)
+_reg("bodies", "omega", "f", ("n_b", 3), "rad/s", "angular velocity, world frame", finite=True)
+_reg("bodies", "mass", "f", ("n_b",), "kg", "mass", finite=True, positive=True)
+_reg("bodies", "inertia", "f", ("n_b", 3), "kg m^2", "principal moments of inertia, body frame", finite=True,
+     positive=True)
+_reg("bodies", "id", "i", ("n_b",), "", "stable body id (survives deletion and reordering)", unique=True)
 _reg("bodies", "flags", "i", ("n_b",), "", "bit 0: fixed translation, bit 1: fixed rotation",
      dtype="int8")
 _reg("bodies", "force", "f", ("n_b", 3), "N", "total force at the last step (first half kick of the next)",
-     required=False)
-_reg("bodies", "torque", "f", ("n_b", 3), "N m", "total torque at the last step", required=False)
+     required=False, finite=True)
+_reg("bodies", "torque", "f", ("n_b", 3), "N m", "total torque at the last step", required=False, finite=True)
 _reg("bodies", "angmom", "f", ("n_b", 3), "kg m^2/s", "angular momentum, world frame (clumps)",
-     required=False, writer="effect clumps")
+     required=False, writer="effect clumps", finite=True)
 
 register_group("spheres", "Spheres, each rigidly attached to a body", required=True)
 _reg("spheres", "body", "i", ("n_s",), "", "index into bodies", index_of="n_b")
-_reg("spheres", "offset", "f", ("n_s", 3), "m", "centre relative to the body centre, body frame")
-_reg("spheres", "radius", "f", ("n_s",), "m", "radius")
+_reg("spheres", "offset", "f", ("n_s", 3), "m", "centre relative to the body centre, body frame", finite=True)
+_reg("spheres", "radius", "f", ("n_s",), "m", "radius", finite=True, positive=True)
 _reg("spheres", "material", "i", ("n_s",), "", "index into materials", index_of="n_m")
 
 register_group("materials", "Contact materials", required=True)
 _reg("materials", "name", "str", ("n_m",), "", "material name")
-_reg("materials", "density", "f", ("n_m",), "kg/m^3", "density")
-_reg("materials", "young", "f", ("n_m",), "Pa", "Young's modulus")
-_reg("materials", "poisson", "f", ("n_m",), "1", "Poisson's ratio")
-_reg("materials", "friction", "f", ("n_m",), "1", "sliding friction coefficient")
-_reg("materials", "rolling_friction", "f", ("n_m",), "1", "rolling friction coefficient")
-_reg("materials", "restitution", "f", ("n_m",), "1", "coefficient of restitution")
+_reg("materials", "density", "f", ("n_m",), "kg/m^3", "density", finite=True, positive=True)
+_reg("materials", "young", "f", ("n_m",), "Pa", "Young's modulus", finite=True, positive=True)
+_reg("materials", "poisson", "f", ("n_m",), "1", "Poisson's ratio", finite=True)
+_reg("materials", "friction", "f", ("n_m",), "1", "sliding friction coefficient", finite=True)
+_reg("materials", "rolling_friction", "f", ("n_m",), "1", "rolling friction coefficient", finite=True)
+_reg("materials", "restitution", "f", ("n_m",), "1", "coefficient of restitution", finite=True)
 
 register_group("walls", "Rigid walls: planes and cylinders", writer="effect walls")
 _W = dict(writer="effect walls")
 _reg("walls", "name", "str", ("n_w",), "", "wall name from the case", **_W)
 _reg("walls", "kind", "i", ("n_w",), "", "0 plane, 1 cylinder", dtype="int8", **_W)
-_reg("walls", "point", "f", ("n_w", 3), "m", "a point on the plane; a point on the cylinder axis", **_W)
-_reg("walls", "normal", "f", ("n_w", 3), "1", "plane normal into the domain; cylinder axis", **_W)
-_reg("walls", "radius", "f", ("n_w",), "m", "cylinder radius (unused for planes)", **_W)
-_reg("walls", "v", "f", ("n_w", 3), "m/s", "wall velocity", **_W)
+_reg("walls", "point", "f", ("n_w", 3), "m", "a point on the plane; a point on the cylinder axis", **_W, finite=True)
+_reg("walls", "normal", "f", ("n_w", 3), "1", "plane normal into the domain; cylinder axis", **_W, finite=True,
+     unit_rows=True)
+_reg("walls", "radius", "f", ("n_w",), "m", "cylinder radius (unused for planes)", **_W, finite=True)
+_reg("walls", "v", "f", ("n_w", 3), "m/s", "wall velocity", **_W, finite=True)
 _reg("walls", "material", "i", ("n_w",), "", "index into materials", index_of="n_m", **_W)
 _reg("walls", "control", "i", ("n_w",), "", "0 fixed, 1 velocity, 2 force, 3 servo", dtype="int8", **_W)
-_reg("walls", "target", "f", ("n_w",), "N or Pa", "control target (force or stress)", **_W)
-_reg("walls", "force", "f", ("n_w", 3), "N", "contact force on the wall at the last step", **_W)
+_reg("walls", "target", "f", ("n_w",), "N or Pa", "control target (force or stress)", **_W, finite=True)
+_reg("walls", "force", "f", ("n_w", 3), "N", "contact force on the wall at the last step", **_W, finite=True)
 _reg("walls", "extent", "f", ("n_w", 6), "m", "drawing bounds xmin ymin zmin xmax ymax zmax", **_W)
 
 register_group("contacts", "Persistent sphere-sphere contacts with their history")
 _reg("contacts", "i", "i", ("n_c",), "", "first sphere (i < j)", index_of="n_s")
 _reg("contacts", "j", "i", ("n_c",), "", "second sphere", index_of="n_s")
 _reg("contacts", "ft", "f", ("n_c", 3), "N", "tangential spring force (history)", required=False,
-     writer="effect friction", when_effect="friction")
+     writer="effect friction", when_effect="friction", finite=True)
 _reg("contacts", "mr", "f", ("n_c", 3), "N m", "rolling-resistance moment (history)", required=False,
-     writer="effect rolling_resistance", when_effect="rolling_resistance")
-_reg("contacts", "force", "f", ("n_c", 3), "N", "last contact force on sphere i")
+     writer="effect rolling_resistance", when_effect="rolling_resistance", finite=True)
+_reg("contacts", "force", "f", ("n_c", 3), "N", "last contact force on sphere i", finite=True)
 
 register_group("wall_contacts", "Persistent sphere-wall contacts with their history", writer="effect walls")
 _reg("wall_contacts", "sphere", "i", ("n_wc",), "", "sphere index", index_of="n_s", **_W)
 _reg("wall_contacts", "wall", "i", ("n_wc",), "", "wall index", index_of="n_w", **_W)
 _reg("wall_contacts", "ft", "f", ("n_wc", 3), "N", "tangential spring force (history)", required=False,
-     writer="effect friction", when_effect="friction")
+     writer="effect friction", when_effect="friction", finite=True)
 _reg("wall_contacts", "mr", "f", ("n_wc", 3), "N m", "rolling-resistance moment (history)", required=False,
-     writer="effect rolling_resistance", when_effect="rolling_resistance")
-_reg("wall_contacts", "force", "f", ("n_wc", 3), "N", "last contact force on the sphere", **_W)
+     writer="effect rolling_resistance", when_effect="rolling_resistance", finite=True)
+_reg("wall_contacts", "force", "f", ("n_wc", 3), "N", "last contact force on the sphere", **_W, finite=True)
 
 register_group("energy", "Energy balance at the last step (scalars)")
 for _name, _doc in [("kinetic", "kinetic energy (translation + rotation)"),
@@ -458,13 +478,43 @@ def _meta_problem(fld: Field, value):
     return None
 
 
-def check(state: State) -> list[str]:
-    """All problems of a state against the registry (empty list: valid)."""
-    problems = []
+def check(state: State, *, values: bool = True, stored: bool = False) -> list[str]:
+    """All problems of a state against the registry (empty list: valid).
+
+    Checks meta, required groups and fields, unknown groups and datasets, dtype kinds,
+    ranks and sizes (one size per dim symbol), index ranges and, with ``values``, the value
+    rules of the fields (finite, > 0, unit rows, unique: :mod:`demcli.state.rules`).
+    ``stored``: the state was read from a file, so each dataset must have its registered
+    dtype exactly (a state in memory may hold int32 for int64: write_state converts it).
+    """
     if not isinstance(state, State):
         return [f"expected a State, got {type(state).__name__}"]
+    problems = _check_meta(state) + _unknown_groups(state)
+    effects = state.meta.get("effects") or []
+    effects = set(effects) if isinstance(effects, (list, tuple, np.ndarray)) else set()
+    sizes: dict[str, tuple[int, str]] = {}  # symbol -> (size, first field)
+    shaped = []  # (field, array) of the right dtype and shape, for the value rules
+    for gname, grp in GROUPS.items():
+        if gname == "meta":
+            continue
+        if grp.tables:
+            problems += _check_tables(state, gname)
+        elif state.has_group(gname):
+            problems += _check_group(state, gname, effects, stored, sizes, shaped)
+        elif grp.required:
+            problems.append(f"missing group {gname!r} ({grp.doc}; written by {grp.writer})")
+    for fld, arr in shaped:
+        if fld.index_of and arr.size:  # a dim no field of the state has is of size 0
+            n = sizes.get(fld.index_of, (0, ""))[0]
+            problems.append(_rules.index_problem(fld.path, arr, fld.index_of, n))
+        if values:
+            problems += _rules.value_problems(fld, arr)
+    return [p for p in problems if p]
 
-    # meta (attributes of /meta)
+
+def _check_meta(state: State) -> list[str]:
+    """Problems of the meta attributes (types, required keys, schema version)."""
+    problems = []
     if "meta" in state.groups:
         problems.append("'meta' is reserved for State.meta and cannot hold datasets")
     for fld in fields_of("meta").values():
@@ -472,82 +522,87 @@ def check(state: State) -> list[str]:
             if fld.required:
                 problems.append(f"missing meta {fld.name!r} ({fld.describe()})")
             continue
-        p = _meta_problem(fld, state.meta[fld.name])
-        if p:
-            problems.append(p)
+        problems.append(_meta_problem(fld, state.meta[fld.name]))
     version = state.meta.get("schema_version")
     if isinstance(version, (int, np.integer)) and version != SCHEMA_VERSION:
         problems.append(f"meta schema_version is {version}, this demcli writes and reads {SCHEMA_VERSION}")
-    effects = state.meta.get("effects") or []
-    effects = set(effects) if isinstance(effects, (list, tuple, np.ndarray)) else set()
+    return [p for p in problems if p]
 
-    sizes: dict[str, tuple[int, str]] = {}  # symbol -> (size, first field)
-    index_checks = []
-    for gname, grp in GROUPS.items():
-        if gname == "meta":
-            continue
-        if grp.tables:
-            problems += _check_tables(state, gname)
-            continue
-        present = state.has_group(gname)
-        if not present:
-            if grp.required:
-                problems.append(f"missing group {gname!r} ({grp.doc}; written by {grp.writer})")
-            continue
-        known = fields_of(gname)
-        data = state.groups.get(gname, {})
-        attrs = state.group_attrs.get(gname, {})
-        for name in data:
-            if name not in known or known[name].attr:
-                hint = difflib.get_close_matches(name, [n for n, f in known.items() if not f.attr], n=1)
-                hint = f"; did you mean {hint[0]!r}?" if hint else ""
-                names = ", ".join(n for n, f in known.items() if not f.attr) or "none"
-                problems.append(f"unknown dataset {name!r} in group {gname!r} (known: {names}){hint}")
-        for name, fld in known.items():
-            if fld.attr:
-                if name not in attrs:
-                    if fld.required:
-                        problems.append(f"missing attribute {fld.path!r} ({fld.describe()})")
-                    continue
-                p = _meta_problem(fld, attrs[name])
-                if p:
-                    problems.append(p)
-                continue
-            if name not in data:
-                if fld.required or (fld.when_effect and fld.when_effect in effects):
-                    problems.append(f"missing field {fld.path!r} ({fld.describe()})")
-                continue
-            arr = np.asarray(data[name])
-            if not _kind_ok(arr, fld.kind):
-                problems.append(f"field {fld.path!r} has dtype {arr.dtype}, expected {KINDS[fld.kind]} "
-                                f"(kind {fld.kind!r})")
-                continue
-            if not fld.dims:
-                if arr.size != 1 or arr.ndim > 1:
-                    problems.append(f"field {fld.path!r} has shape {arr.shape}, expected a scalar")
-                continue
-            if arr.ndim != len(fld.dims):
-                problems.append(f"field {fld.path!r} has shape {arr.shape}, expected {fld.dims_text}")
-                continue
-            for sym, size in zip(fld.dims, arr.shape):
-                if isinstance(sym, int):
-                    if size != sym:
-                        problems.append(f"field {fld.path!r} has shape {arr.shape}, expected {fld.dims_text}")
-                        break
-                elif sym in sizes and sizes[sym][0] != size:
-                    first_size, first = sizes[sym]
-                    problems.append(f"inconsistent {sym}: {fld.path!r} has {size} but {first!r} has {first_size}")
-                else:
-                    sizes.setdefault(sym, (int(size), fld.path))
-            if fld.index_of:
-                index_checks.append((fld, arr))
-    for fld, arr in index_checks:
-        if fld.index_of in sizes and arr.size:
-            n = sizes[fld.index_of][0]
-            lo, hi = int(arr.min()), int(arr.max())
-            if lo < 0 or hi >= n:
-                problems.append(f"field {fld.path!r} indexes {fld.index_of}={n} but holds values in [{lo}, {hi}]")
+
+def _unregistered(state: State) -> list[str]:
+    tables = [g + "/" for g, grp in GROUPS.items() if grp.tables]
+    return sorted(g for g in set(state.groups) | set(state.group_attrs)
+                  if g != "meta" and g not in GROUPS and not g.startswith(tuple(tables)))
+
+
+def _hint(name, names) -> str:
+    """'; did you mean X?' for the closest of ``names``, or ''."""
+    close = difflib.get_close_matches(name, list(names), n=1)
+    return f"; did you mean {close[0]!r}?" if close else ""
+
+
+def _unknown_groups(state: State) -> list[str]:
+    """Groups that no demcli module registers (every module is imported before one is
+    called unknown: a stage's groups are known even where the stage was not imported)."""
+    unknown = _unregistered(state)
+    if unknown:
+        register_all()
+        unknown = _unregistered(state)
+    problems = []
+    for gname in unknown:
+        problems.append(f"unknown group {gname!r} (no demcli stage or effect writes it){_hint(gname, GROUPS)}")
     return problems
+
+
+def _check_group(state, gname, effects, stored, sizes, shaped) -> list[str]:
+    """Problems of one registered group; its fields of the right dtype and shape go to ``shaped``."""
+    problems = []
+    known = fields_of(gname)
+    data = state.groups.get(gname, {})
+    attrs = state.group_attrs.get(gname, {})
+    datasets = [n for n, f in known.items() if not f.attr]
+    for name in data:
+        if name not in datasets:
+            problems.append(f"unknown dataset {name!r} in group {gname!r} "
+                            f"(known: {', '.join(datasets) or 'none'}){_hint(name, datasets)}")
+    for name, fld in known.items():
+        have = attrs if fld.attr else data
+        if name not in have:
+            if fld.required or (fld.when_effect and fld.when_effect in effects):
+                problems.append(f"missing {'attribute' if fld.attr else 'field'} {fld.path!r} ({fld.describe()})")
+        elif fld.attr:
+            problems.append(_meta_problem(fld, attrs[name]))
+        else:
+            arr = np.asarray(data[name])
+            problem = _shape_problem(fld, arr, stored, sizes)
+            problems.append(problem)
+            if problem is None:
+                shaped.append((fld, arr))
+    return [p for p in problems if p]
+
+
+def _shape_problem(fld: Field, arr: np.ndarray, stored: bool, sizes: dict):
+    """The dtype or shape problem of a dataset, or None; records the sizes of its dim symbols."""
+    if not _kind_ok(arr, fld.kind):
+        return f"field {fld.path!r} has dtype {arr.dtype}, expected {KINDS[fld.kind]} (kind {fld.kind!r})"
+    if stored and fld.dtype is not None and arr.dtype != np.dtype(fld.dtype):
+        return f"field {fld.path!r} is stored as {arr.dtype}, expected {fld.dtype}"
+    if not fld.dims:
+        if arr.size != 1 or arr.ndim > 1:
+            return f"field {fld.path!r} has shape {arr.shape}, expected a scalar"
+        return None
+    if arr.ndim != len(fld.dims):
+        return f"field {fld.path!r} has shape {arr.shape}, expected {fld.dims_text}"
+    for sym, size in zip(fld.dims, arr.shape):
+        if isinstance(sym, int):
+            if size != sym:
+                return f"field {fld.path!r} has shape {arr.shape}, expected {fld.dims_text}"
+        elif sym in sizes and sizes[sym][0] != size:
+            first_size, first = sizes[sym]
+            return f"inconsistent {sym}: {fld.path!r} has {size} but {first!r} has {first_size}"
+        else:
+            sizes.setdefault(sym, (int(size), fld.path))
+    return None
 
 
 def _check_tables(state: State, gname: str) -> list[str]:
@@ -582,9 +637,10 @@ def _check_tables(state: State, gname: str) -> list[str]:
     return problems
 
 
-def validate(state: State, source=None) -> None:
-    """Raise :class:`StateError` (one line, naming ``source``) if the state breaks the registry."""
-    problems = check(state)
+def validate(state: State, source=None, *, values: bool = True, stored: bool = False) -> None:
+    """Raise :class:`StateError` (one line, naming ``source``) if the state breaks the
+    registry (``values``, ``stored``: as in :func:`check`)."""
+    problems = check(state, values=values, stored=stored)
     if problems:
         raise StateError(_problem_line(problems, source))
 
@@ -622,8 +678,8 @@ def require(state: State, paths, *, consumer: str, source=None) -> None:
 def schema_markdown(groups=None) -> str:
     """The registry (or only ``groups``) as Markdown tables: fields, then groups."""
     keep = set(GROUPS if groups is None else groups)
-    lines = ["| group | field | dtype | dims | unit | required | written by | doc |",
-             "|---|---|---|---|---|---|---|---|"]
+    lines = ["| group | field | dtype | dims | unit | required | rules | written by | doc |",
+             "|---|---|---|---|---|---|---|---|---|"]
     for fld in FIELDS.values():
         if fld.group not in keep:
             continue
@@ -632,7 +688,7 @@ def schema_markdown(groups=None) -> str:
             dtype += " (attr)"
         req = "yes" if fld.required else (f"with {fld.when_effect}" if fld.when_effect else "no")
         lines.append(f"| {fld.group} | {fld.name} | {dtype} | {fld.dims_text} | {fld.unit} | {req} "
-                     f"| {fld.writer} | {fld.doc} |")
+                     f"| {fld.rules_text} | {fld.writer} | {fld.doc} |")
     lines.append("")
     lines.append("| group | required | tables | written by | doc |")
     lines.append("|---|---|---|---|---|")

@@ -48,19 +48,24 @@ register_group("polyhedron_shapes", "Convex polyhedron templates in the body (pr
                writer="stage assemble")
 for _name, _kind, _dims, _unit, _doc, _kw in [
         ("vertex_start", "i", ("n_shape+1",), "", "first vertex row of each shape, then the total", {}),
-        ("vertices", "f", ("n_pv", 3), "m", "vertices in the body frame (centroid origin, principal axes)", {}),
+        ("vertices", "f", ("n_pv", 3), "m", "vertices in the body frame (centroid origin, principal axes)",
+         {"finite": True}),
         ("face_start", "i", ("n_shape+1",), "", "first face of each shape, then the total", {}),
         ("face_vertex_start", "i", ("n_pf+1",), "", "first entry of each face in face_vertices, then the total",
          {}),
         ("face_vertices", "i", ("n_pfv",), "", "vertex rows of each face, counter-clockwise from outside",
          {"index_of": "n_pv"}),
-        ("face_normal", "f", ("n_pf", 3), "1", "outward unit normal of each face, body frame", {}),
-        ("face_offset", "f", ("n_pf",), "m", "plane offset d: n . x = d on the face, n . x <= d inside", {}),
+        ("face_normal", "f", ("n_pf", 3), "1", "outward unit normal of each face, body frame",
+         {"finite": True, "unit_rows": True}),
+        ("face_offset", "f", ("n_pf",), "m", "plane offset d: n . x = d on the face, n . x <= d inside",
+         {"finite": True}),
         ("edge_start", "i", ("n_shape+1",), "", "first edge of each shape, then the total", {}),
         ("edges", "i", ("n_pe", 2), "", "vertex-row pairs of each edge (each edge once)", {"index_of": "n_pv"}),
-        ("volume", "f", ("n_shape",), "m^3", "volume", {}),
-        ("inertia", "f", ("n_shape", 3), "m^5", "principal moments of inertia for unit density, ascending", {}),
-        ("radius", "f", ("n_shape",), "m", "largest vertex distance from the centroid", {})]:
+        ("volume", "f", ("n_shape",), "m^3", "volume", {"finite": True, "positive": True}),
+        ("inertia", "f", ("n_shape", 3), "m^5", "principal moments of inertia for unit density, ascending",
+         {"finite": True, "positive": True}),
+        ("radius", "f", ("n_shape",), "m", "largest vertex distance from the centroid",
+         {"finite": True, "positive": True})]:
     register(Field(f"polyhedron_shapes/{_name}", _kind, _dims, _unit, _doc, writer="stage assemble", **_kw))
 
 register_group("body_contacts", "Persistent polyhedron-polyhedron contacts with their history",
@@ -68,9 +73,10 @@ register_group("body_contacts", "Persistent polyhedron-polyhedron contacts with 
 for _name, _kind, _dims, _unit, _doc, _kw in [
         ("i", "i", ("n_bc",), "", "first body (i < j)", {"index_of": "n_b"}),
         ("j", "i", ("n_bc",), "", "second body", {"index_of": "n_b"}),
-        ("ft", "f", ("n_bc", 3), "N", "tangential spring force (history)", {"required": False}),
-        ("force", "f", ("n_bc", 3), "N", "last contact force on body i", {}),
-        ("depth", "f", ("n_bc",), "m", "overlap depth d = V / A_c of the last evaluation", {"required": False})]:
+        ("ft", "f", ("n_bc", 3), "N", "tangential spring force (history)", {"required": False, "finite": True}),
+        ("force", "f", ("n_bc", 3), "N", "last contact force on body i", {"finite": True}),
+        ("depth", "f", ("n_bc",), "m", "overlap depth d = V / A_c of the last evaluation",
+         {"required": False, "finite": True})]:
     register(Field(f"body_contacts/{_name}", _kind, _dims, _unit, _doc, writer="engine (polyhedra)", **_kw))
 
 register_group("body_wall_contacts", "Persistent polyhedron-wall contacts with their history",
@@ -78,9 +84,10 @@ register_group("body_wall_contacts", "Persistent polyhedron-wall contacts with t
 for _name, _kind, _dims, _unit, _doc, _kw in [
         ("body", "i", ("n_bwc",), "", "body index", {"index_of": "n_b"}),
         ("wall", "i", ("n_bwc",), "", "wall index", {"index_of": "n_w"}),
-        ("ft", "f", ("n_bwc", 3), "N", "tangential spring force (history)", {"required": False}),
-        ("force", "f", ("n_bwc", 3), "N", "last contact force on the body", {}),
-        ("depth", "f", ("n_bwc",), "m", "overlap depth d = V / A_c of the last evaluation", {"required": False})]:
+        ("ft", "f", ("n_bwc", 3), "N", "tangential spring force (history)", {"required": False, "finite": True}),
+        ("force", "f", ("n_bwc", 3), "N", "last contact force on the body", {"finite": True}),
+        ("depth", "f", ("n_bwc",), "m", "overlap depth d = V / A_c of the last evaluation",
+         {"required": False, "finite": True})]:
     register(Field(f"body_wall_contacts/{_name}", _kind, _dims, _unit, _doc, writer="engine (polyhedra)", **_kw))
 
 register_group("adaptive_damping", "State of the adaptive mass-proportional damping (seed 002, eqs. 23-27)",
@@ -97,11 +104,12 @@ register_group("actors", "Rigid bodies that load the bed (loading plate, sleeper
 for _name, _kind, _dims, _unit, _doc, _kw in [
         ("body", "i", ("n_a",), "", "body index", {"index_of": "n_b"}),
         ("name", "str", ("n_a",), "", "role: plate or sleeper", {}),
-        ("load_mean", "f", ("n_a", 3), "N", "mean prescribed force (besides gravity)", {}),
-        ("load_amplitude", "f", ("n_a", 3), "N", "amplitude of the sinusoidal part", {}),
-        ("frequency", "f", ("n_a",), "Hz", "load frequency", {}),
-        ("phase", "f", ("n_a",), "rad", "phase of the sine at the start time", {}),
-        ("start", "f", ("n_a",), "s", "time the oscillation starts (before: the force at its phase)", {})]:
+        ("load_mean", "f", ("n_a", 3), "N", "mean prescribed force (besides gravity)", {"finite": True}),
+        ("load_amplitude", "f", ("n_a", 3), "N", "amplitude of the sinusoidal part", {"finite": True}),
+        ("frequency", "f", ("n_a",), "Hz", "load frequency", {"finite": True}),
+        ("phase", "f", ("n_a",), "rad", "phase of the sine at the start time", {"finite": True}),
+        ("start", "f", ("n_a",), "s", "time the oscillation starts (before: the force at its phase)",
+         {"finite": True})]:
     register(Field(f"actors/{_name}", _kind, _dims, _unit, _doc, writer="stages vibrate, sleeper", **_kw))
 
 SHAPE_FIELDS = ("vertex_start", "vertices", "face_start", "face_vertex_start", "face_vertices", "face_normal",

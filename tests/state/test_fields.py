@@ -1,5 +1,7 @@
 """Field registry: validation of dtypes, dims, required and unknown fields."""
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -69,12 +71,30 @@ def test_unknown_dataset_in_known_group_is_rejected_with_hint():
     assert any("unknown dataset 'omgea' in group 'bodies'" in p and "'omega'" in p for p in problems)
 
 
-def test_unknown_group_is_kept_not_rejected():
-    # Given a group no module registered (a stage not imported here)
+def test_unknown_group_is_rejected():
+    # Given a group no demcli module registers (every module is imported before saying so)
     state = example_state()
     state["gradation_unregistered/sieve"] = np.array([9.5, 4.75])
-    # When checked / Then it passes: unknown groups are carried through
-    assert check(state) == []
+    # When checked / Then it is named
+    assert check(state) == ["unknown group 'gradation_unregistered' (no demcli stage or effect writes it)"]
+
+
+def test_group_of_a_stage_not_imported_is_known(tmp_path):
+    # Given a state holding the gradation group, read where no stage module was imported
+    import subprocess
+    import sys
+
+    from demcli import run_case
+
+    case = Path(__file__).resolve().parents[2] / "cases" / "smoke" / "ballast_deposit.yaml"
+    run_case(case, out=tmp_path, only="grading", quiet=True)
+    code = ("import sys; from demcli.state import read_state; before = 'demcli.stages.gradation' in sys.modules; "
+            "st = read_state(sys.argv[1]); print(before, sorted(st.groups))")
+    out = subprocess.run([sys.executable, "-c", code, str(tmp_path / "00-grading.h5")], capture_output=True,
+                         text=True)
+    # Then it reads and validates: the registry imports the stage that registers the group
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.startswith("False") and "'gradation'" in out.stdout
 
 
 def test_missing_field_names_writer():

@@ -220,7 +220,11 @@ def test_read_meta_and_summary(good_file, state):
         assert expected in text, expected
 
 
-def test_summary_reports_validation_failure(good_file):
+def test_summary_refuses_an_invalid_state(good_file):
+    # Given a file that lost bodies/mass
     with h5py.File(good_file, "a") as f:
         del f["bodies/mass"]
-    assert "validation FAILED" in summarize(good_file) and "bodies/mass" in summarize(good_file)
+    # When summarized / Then a StateError names the file and the field (demcli info exits 2)
+    with pytest.raises(StateError) as err:
+        summarize(good_file)
+    assert str(good_file) in _msg(err) and "missing field 'bodies/mass'" in _msg(err)
