@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from demcli.errors import InputError, StageError, WriteError
+from demcli.errors import InputError, StageError, StateError, WriteError
 from demcli.progress import Progress
 
 
@@ -34,6 +34,11 @@ def _read_only(folder):
         return bool(os.statvfs(folder).f_flag & os.ST_RDONLY)
     except OSError:
         return False
+
+
+def _reason(exc, path):
+    """A StateError's message without the file name it starts with."""
+    return exc.format_message().removeprefix(f"{path}: ")
 
 
 @dataclass
@@ -91,12 +96,18 @@ class StageContext:
         return st
 
     def load_checkpoint(self):
-        """The checkpoint of this stage when resuming and it matches this config and input."""
+        """The checkpoint of this stage when resuming and it matches this config and input;
+        None otherwise (an unreadable checkpoint is logged: the stage starts afresh)."""
         from demcli.state import read_state
 
         if not self.runner.resume or not self.checkpoint_path.exists():
             return None
-        st = read_state(self.checkpoint_path)
+        try:
+            st = read_state(self.checkpoint_path)
+        except StateError as exc:
+            self.log(f"checkpoint {self.checkpoint_path.name} is unreadable ({_reason(exc, self.checkpoint_path)}); "
+                     "starting the stage afresh")
+            return None
         if st.meta.get("config_hash") != self.config_hash or st.meta.get("input_hash") != self.input_hash:
             self.log("checkpoint is from another config or input; starting the stage afresh")
             return None
@@ -257,9 +268,24 @@ class Runner:
                                      "case again to go on with the next stages") from None
         return state, StageResult(ctx.name, out_path, False, wall, ctx.throughput)
 
+    def _up_to_date(self, name, out_path, config_hash, input_hash):
+        """The state of a stage whose output records the same config and input hashes, read
+        whole (checksums, value rules) and kept as the next stage's input; None when the stage
+        must run, also when its output is unreadable (logged: the stage is recomputed)."""
+        from demcli.state import read_meta, read_state
+
+        try:
+            meta = read_meta(out_path)
+            if meta.get("config_hash") != config_hash or meta.get("input_hash") != input_hash:
+                return None
+            return read_state(out_path)
+        except StateError as exc:
+            self.log(f"[{name}] state {out_path.name} is unreadable ({_reason(exc, out_path)}); recomputing the stage")
+            return None
+
     def run(self, from_stage=None, only=None, force=False):
         from demcli.stages.base import STAGE_TYPES, load_stage_types
-        from demcli.state import read_meta, read_state, require, state_hash
+        from demcli.state import read_state, require, state_hash
         from demcli.state.order import spatial_order
 
         load_stage_types()
@@ -297,13 +323,14 @@ class Runner:
                     input_hash = ""
                 chash = self.config_hash(cfg)
                 forced = force or (from_stage is not None and k >= first) or only_k == k
+                done = None
                 if not forced and out_path.exists():
-                    meta = read_meta(out_path)
-                    if meta.get("config_hash") == chash and meta.get("input_hash") == input_hash:
-                        self.log(f"[{cfg.name}] up to date ({out_path.name}); skipped")
-                        results.append(StageResult(cfg.name, out_path, True, 0.0))
-                        state_in, in_path = None, out_path
-                        continue
+                    done = self._up_to_date(cfg.name, out_path, chash, input_hash)
+                if done is not None:
+                    self.log(f"[{cfg.name}] up to date ({out_path.name}); skipped")
+                    results.append(StageResult(cfg.name, out_path, True, 0.0))
+                    state_in, in_path = done, out_path
+                    continue
                 if moved:
                     self.log(f"[{cfg.name}] particles stored in cell order (neighbours close in memory)")
                 ctx = StageContext(self, k, cfg, chash, input_hash)
