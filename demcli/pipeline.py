@@ -306,10 +306,7 @@ class Runner:
                     state_in = None
                     continue
                 moved = False
-                if st_type.needs_input:
-                    if k == 0:
-                        raise InputError(f"{self.case_path}: stage {cfg.name} ({cfg.type}) needs an input state, "
-                                         "but it is the first stage")
+                if st_type.needs_input:  # (validation refuses a first stage that needs an input)
                     if in_path is None or not in_path.exists():
                         raise InputError(f"stage {cfg.name}: missing stage input {in_path}; run the earlier "
                                          "stages first (without --from/--only)")

@@ -54,13 +54,13 @@ from demcli.config.schema import Float, Int, Optional, Section, Str, Tagged
 from demcli.errors import StageError, StateError
 from demcli.stages.base import StageType, earlier_stage, register_stage
 from demcli.state.fields import Field, register, register_group
-
-LIBRARY_FORMAT = "demcli ballast library"
 from demcli.state.records import describe_column
 
 describe_column("flaky", "Flaky share", "%", table="library", doc="percent of the class's particles that are flaky")
 describe_column("elongated", "Elongated share", "%", table="library",
                 doc="percent of the class's particles that are elongated")
+
+LIBRARY_FORMAT = "demcli ballast library"
 LIBRARY_VERSION = 1
 SIEVE_METHODS = ("projection", "volume_sphere", "volume_cube", "inertia_square")
 # target sizes are drawn in [lower + m (upper - lower), upper - m (upper - lower)] so that
