@@ -91,7 +91,8 @@ def compare(runs, record, x, ys, out, earlier):
               help="Column of records/<stage>_<table>.csv, reduced by @last (default), @first, @max, @min or @mean.")
 @click.option("--reference", default="last", show_default=True, metavar="last|first|VARIANT",
               help="The finest variant: each --vary's last or first value, or a variant's folder name.")
-@click.option("--set", "overrides", multiple=True, metavar="PATH=VALUE", help="Override a value in every variant.")
+@click.option("--set", "overrides", multiple=True, metavar="PATH=VALUE",
+              help="In every variant: " + SET_HELP[0].lower() + SET_HELP[1:])
 @click.option("--out", type=click.Path(file_okay=False), help="Study folder (default studies/<case name>).")
 @click.option("--jobs", type=click.IntRange(min=1),
               help="Variants run at once (default: free cores // threads per job).")

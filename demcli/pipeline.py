@@ -249,8 +249,8 @@ class Runner:
             self.log(f"[{ctx.name}] {exc.format_message()}")
             raise
         except KeyboardInterrupt:
-            raise self._stopped(ctx, f"stage {ctx.name} interrupted; it keeps no checkpoint and starts again from "
-                                     "its input when the case is run again") from None
+            raise self._stopped(ctx, f"stage {ctx.name} interrupted; run the case again to redo it, with --resume "
+                                     "to continue from its checkpoint if it wrote one") from None
         try:
             with interrupts.deferred() as poll:
                 set_rng(state, ctx.rng)

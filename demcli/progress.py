@@ -49,6 +49,7 @@ class Progress:
         return out, frac
 
     def update(self, step, end=None):
+        """Show progress at ``step`` (``end``: the forecast last step, or None), as the class says."""
         if self.quiet or self.total <= 0:
             return
         now = _time.perf_counter()
@@ -65,6 +66,7 @@ class Progress:
             self.next_pct = (int(100 * frac) // 10 + 1) * 10
 
     def close(self):
+        """Clear a terminal's live line."""
         if self.tty and not self.quiet:
             sys.stderr.write("\r" + " " * 120 + "\r")
             sys.stderr.flush()

@@ -60,6 +60,7 @@ import yaml
 
 from demcli.config import (NOVALUE, ConfigIssue, Field, Int, List, Map, Node, Optional, Section, Str, format_path,
                            load_yaml, validate)
+from demcli.config.case import SEED_MAX
 from demcli.errors import ConfigError, DemcliError, InputError
 from demcli.state.atomic import atomic_write_text
 from demcli.study import Vary, _header, _num, default_jobs, make_variants, parse_metric, read_metric
@@ -110,8 +111,14 @@ class _Metric(Str):
         return out
 
 
-_SEED_LIST = List(Int(min=0), min_len=1)
-_SEED_RANGE = Section({"first": Int(min=0, default=1, doc="first seed"), "count": Int(min=1, doc="number of seeds")})
+def _seeds_fit(node, report):
+    if node.first + node.count - 1 > SEED_MAX:
+        report("count", f"the last seed passes {SEED_MAX} (2^63 - 1, what a state file holds)", node.count)
+
+
+_SEED_LIST = List(Int(min=0, max=SEED_MAX), min_len=1)
+_SEED_RANGE = Section({"first": Int(min=0, max=SEED_MAX, default=1, doc="first seed"),
+                       "count": Int(min=1, doc="number of seeds")}, check=_seeds_fit)
 
 
 class _Seeds(Field):

@@ -5,7 +5,7 @@ program takes one of the cores, a two-thread loop can run 20 times slower than o
 (measured: 5.0e7 -> 2.2e6 particle-steps/s). The start-up choice (:func:`demcli.jit.free_cores`,
 from the load average) cannot see a program that starts later, so :class:`ThreadGovernor`
 watches the loop: it times every chunk per step and, every ``probe_every`` seconds or at once
-when a chunk runs ``slowdown`` times slower per step than the best so far, runs one chunk
+when a chunk runs ``slowdown`` times slower per step than the chunk before it, runs one chunk
 on the other thread count (one thread, or the asked-for count when it had fallen back),
 and keeps whichever was faster. The kernels give bit-identical results for any thread
 count, so switching changes nothing but the speed.
@@ -24,8 +24,9 @@ class ThreadGovernor:
         log: ``log(message)`` for each switch.
         probe_every: wall-clock seconds between two probes of the other thread count
             (default ``PROBE_EVERY``).
-        slowdown: a chunk slower per step than the best of its thread count by this factor
-            asks for a probe now.
+        slowdown: a chunk slower per step than the one before it by this factor asks for a
+            probe now (against the one before, not the best so far: a stage whose steps grow
+            dearer as contacts form must not probe at every chunk).
         margin: the other count must be faster by this fraction to switch.
     """
 
@@ -41,7 +42,6 @@ class ThreadGovernor:
         self.clock = clock
         self.next_probe = clock() + probe_every
         self.recent = {}  # thread count -> seconds per step of its last timed chunk
-        self.best = {}    # thread count -> best seconds per step seen
         self.probing = False
         self.chunks = 0
 
@@ -62,8 +62,8 @@ class ThreadGovernor:
             return
         n = self._other() if self.probing else self.active
         per_step = seconds / steps
+        previous = self.recent.get(n, per_step)
         self.recent[n] = per_step
-        self.best[n] = min(per_step, self.best.get(n, per_step))
         if self.probing:
             self.probing = False
             self.next_probe = self.clock() + self.probe_every
@@ -73,7 +73,7 @@ class ThreadGovernor:
                          + (" (another program is using a core)" if n == 1 else " (the cores are free again)"))
                 self.active = n
             return
-        if self.clock() >= self.next_probe or per_step > self.slowdown * self.best[n]:
+        if self.clock() >= self.next_probe or per_step > self.slowdown * previous:
             self.probing = True
 
     def close(self):

@@ -63,3 +63,27 @@ def test_compile_notice_only_when_nothing_is_compiled_or_cached(tmp_path, monkey
         return x + 2
 
     assert "compiling kernels" in compile_notice(g) and "cache is off" in compile_notice(g)
+
+
+def test_compile_notice_before_the_first_compile_and_none_once_cached(tmp_path, monkeypatch):
+    import importlib.util
+
+    import numba
+
+    # Given a kernel module with numba's on-disk cache in a fresh folder
+    monkeypatch.setattr(numba.config, "CACHE_DIR", str(tmp_path / "cache"))
+    src = tmp_path / "kern.py"
+    src.write_text("import numba\n\n\n@numba.njit(cache=True)\ndef f(x):\n    return x * 2\n")
+
+    def load(name):
+        spec = importlib.util.spec_from_file_location(name, src)
+        mod = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(mod)
+        return mod.f
+
+    f = load("kern_a")
+    # Then before its first call the notice says it is about to compile
+    assert "first run on this machine" in compile_notice(f)
+    f(3)  # compiles and writes the cache
+    # and a fresh dispatcher of the same kernel (a later run) finds it cached: no notice
+    assert compile_notice(load("kern_b")) is None

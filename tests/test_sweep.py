@@ -45,6 +45,16 @@ def _record(run_dir, column):
 
 # ---- the sweep file and its grid (no cluster) ----------------------------------------------
 
+@pytest.mark.parametrize("seeds, needle", [("[1180591620717411303424]", "seeds[0]: must be <="),
+                                           ("{first: 9223372036854775800, count: 10}", "seeds.count: the last seed")])
+def test_seeds_beyond_64_bits_fail_the_sweep_check(tmp_path, seeds, needle):
+    # Given seeds a state file cannot hold (#27 item 6: each run failed after its first stage)
+    path = _sweep_file(tmp_path, f"seeds: {seeds}\nruns:\n  - case: CASE\n")
+    # Then the sweep check refuses them, naming the key
+    result = _invoke(["sweep", path, "--check"])
+    assert result.exit_code == 2 and needle in result.output and "Traceback" not in result.output, result.output
+
+
 def test_seeds_and_vary_expand_to_a_grid(tmp_path):
     # Given a run with two dt factors and three seeds, and a top-level set that the run extends
     path = _sweep_file(tmp_path, f"""\

@@ -61,6 +61,18 @@ def test_probes_cost_one_chunk_per_interval_and_keep_the_faster_count(restore_th
     assert 15 <= probes <= 25 and lines == []
 
 
+def test_steps_growing_dearer_do_not_make_it_probe_at_every_chunk(restore_threads):
+    """A settling bed's steps cost more as contacts form (here 4 x over the run): that is no
+    reason to probe; only the periodic probes run on one thread, and it keeps two."""
+    clock, lines = _Clock(), []
+    gov = ThreadGovernor(2, lines.append, probe_every=30.0, clock=clock)
+    used = []
+    for k in range(2000):
+        grow = 1.0 + 3.0 * k / 2000
+        used += _run(gov, clock, {1: 1e-3 * grow, 2: 1e-3 / 1.7 * grow}, 1)
+    assert used.count(1) < 0.01 * len(used) and lines == []
+
+
 def test_one_thread_asked_is_left_alone(restore_threads):
     clock, lines = _Clock(), []
     gov = ThreadGovernor(1, lines.append, probe_every=0.0, clock=clock)

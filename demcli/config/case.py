@@ -8,15 +8,18 @@ passes does not fail later for a reason known before it runs:
   problem): each ``material``, ``*_material`` and ``materials`` list names a material of
   the case; each stage's input holds what its type ``requires``, written by an earlier
   stage (see :func:`demcli.stages.base.input_scenes`), and the first stage needs no input;
-* on the validated case: what a stage's config reads besides (``config_requires``), and
-  each stage type's ``case_check`` (dimension, the classes of the gradation, memory).
+* on the valid part of the case, in the same pass (its top-level keys and its stages up to
+  the first invalid one, each validated on its own): what a stage's config reads besides
+  (``config_requires``), and each stage type's ``case_check`` (dimension, the classes of the
+  gradation, memory).
 """
 
 from collections.abc import Mapping
 from functools import lru_cache
 
 from demcli.config.load import load_case as _load_case
-from demcli.config.schema import NOVALUE, Float, Int, List, Map, Section, Str, Tagged, did_you_mean, split_subpath
+from demcli.config.schema import (NOVALUE, Float, Int, List, Map, Node, Section, Str, Tagged, did_you_mean,
+                                  split_subpath, validate_quietly)
 
 MATERIAL = Section({
     "density": Float("kg/m^3", min=0, min_inclusive=False, doc="particle density"),
@@ -106,6 +109,29 @@ def _cross_refs(case, report):
     names = list(materials) if isinstance(materials, Mapping) else []
     _material_refs(stages, names, report)
     _stage_inputs(stages, report)
+    valid = _valid_part(case, stages)
+    if valid is not None:
+        _case_rules(valid, report)
+
+
+def _valid_part(case, stages):
+    """The case with its top-level keys and its stages up to the first invalid one, each
+    validated on its own (so that the case rules of those stages come in the same pass as the
+    other problems), or None when a top-level key is invalid."""
+    schema = case_schema()
+    top = {}
+    for key, field in schema.fields.items():
+        if key != "stages":
+            top[key] = validate_quietly(field, case[key], (key,)) if key in case else field.default_value((key,))
+            if top[key] is None and key in case:
+                return None
+    valid = []
+    for k, raw in enumerate(stages):
+        node = validate_quietly(schema.fields["stages"].item, raw, ("stages", k))
+        if node is None:
+            break
+        valid.append(node)
+    return Node({**top, "stages": tuple(valid)})
 
 
 def _stage_reporter(report, k):
@@ -115,7 +141,8 @@ def _stage_reporter(report, k):
 
 
 def _case_rules(case, report):
-    """Rules of the validated case: inputs a stage's config reads, and each type's case check."""
+    """Rules of the valid part of a case (:func:`_valid_part`): inputs a stage's config reads,
+    and each type's case check."""
     from demcli.stages.base import STAGE_TYPES, has_field, input_scenes
 
     for k, (cfg, scene) in enumerate(zip(case.stages, input_scenes(case.stages))):
@@ -149,7 +176,7 @@ def case_schema():
                            doc="2D only: out-of-plane thickness for disk masses"),
         "materials": Map(MATERIAL, key_pattern=NAME, default={}, doc="materials by name"),
         "stages": List(Tagged("type", variants), min_len=1, unique_by="name", doc="stages, run in order"),
-    }, check=_case_rules, check_raw=_cross_refs)
+    }, check_raw=_cross_refs)
 
 
 def load_case(path, overrides=()):

@@ -201,6 +201,15 @@ class _Context:
         self.issues.append(ConfigIssue(file, line, format_path(path), rule, value, hint))
 
 
+def validate_quietly(field, value, path=()):
+    """``field``'s validated ``value`` (a Node for a section), or None when it has any issue;
+    the issues are dropped (for rules that run on the valid parts of an invalid case, while
+    the main pass reports the issues)."""
+    ctx = _Context()
+    out = field.validate(value, tuple(path), ctx)
+    return None if ctx.issues or out is _INVALID else out
+
+
 def validate_tree(schema, data, marks=None, filename=None):
     """Validate ``data`` against ``schema``; return ``(node_or_None, issues)``.
 

@@ -146,6 +146,7 @@ class Porosity:
         else:
             self._replay(checkpoint.groups["records/dem"])
             self._restore_walls(system)
+            self.reason = str(checkpoint.groups["checkpoint"].get("ended") or "") or None  # it had stopped
 
     def _replay(self, rows):
         """The switching and stop state after the stored record rows: the first row is the

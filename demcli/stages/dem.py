@@ -19,9 +19,9 @@ import numpy as np
 from demcli import interrupts
 from demcli.config.schema import Bool, Float, Int, List, Map, Optional, Section, Str, Tagged, Vector
 from demcli.errors import InputError, StageError, StateError
-from demcli.progress import StopForecast, compile_notice
+from demcli.progress import StopForecast
 from demcli.stages.base import ENGINE_KEEPS, ENGINE_OUTPUT, StageType, has_field, register_stage
-from demcli.threads import ThreadGovernor
+from demcli.stepping import Stepper
 from demcli.state.fields import Field, register, register_group
 
 register_group("checkpoint", "Engine accumulators of an interrupted dem stage (only in .ckpt.h5 files)",
@@ -713,6 +713,28 @@ def run(ctx, cfg, state_in):
     return integrate(ctx, cfg, state_in)
 
 
+def _restore(system, groups):
+    """What a checkpoint's ``groups`` keep beyond the scene, back into a system built on them:
+    the walls' positions, velocities, forces and radii, the engine's accumulators, and the
+    stored loads (the first step uses them, as the interrupted run would have)."""
+    from demcli.kernels.walls import W_RATE
+
+    system.wpoint[:] = groups["walls"]["point"]
+    system.wv[:] = groups["walls"]["v"]
+    system.wforce[:] = groups["walls"]["force"]
+    system.walls.radius[:] = groups["walls"]["radius"]
+    c = groups["checkpoint"]
+    if "wall_rate" in c:
+        system.walls.prm[:, W_RATE] = c["wall_rate"]
+    system.losses0 = dict(zip(("damping", "friction", "body_damping", "wall_work"), map(float, c["losses0"])))
+    if len(system.esph):
+        system.esph[:] = c["esph"]
+        system.ebody[:] = c["ebody"]
+    system.eacc[:] = c["eacc"]
+    system.ke_limit = float(c["ke_limit"][0])
+    system.prime = False
+
+
 def integrate(ctx, cfg, state_in, hooks=None):
     """The ``dem`` stage loop on ``cfg`` (the dem schema's keys), with a stage's ``hooks``."""
     from demcli.kernels import layout as K
@@ -727,22 +749,7 @@ def integrate(ctx, cfg, state_in, hooks=None):
                                             else 0.0, step=int(source.meta.get("step", 0)) if ckpt else 0,
                                             resume=ckpt is not None)
     if ckpt is not None:
-        from demcli.kernels.walls import W_RATE
-
-        system.wpoint[:] = groups["walls"]["point"]
-        system.wv[:] = groups["walls"]["v"]
-        system.wforce[:] = groups["walls"]["force"]
-        system.walls.radius[:] = groups["walls"]["radius"]
-        if "wall_rate" in groups["checkpoint"]:
-            system.walls.prm[:, W_RATE] = groups["checkpoint"]["wall_rate"]
-        c = groups["checkpoint"]
-        system.losses0 = dict(zip(("damping", "friction", "body_damping", "wall_work"), map(float, c["losses0"])))
-        if len(system.esph):
-            system.esph[:] = c["esph"]
-            system.ebody[:] = c["ebody"]
-        system.eacc[:] = c["eacc"]
-        system.ke_limit = float(c["ke_limit"][0])
-        system.prime = False  # the stored loads are those of the interrupted run
+        _restore(system, groups)
     else:
         system.ke_limit = cfg.safety.energy_limit * reference_energy(system)
     hooks = hooks or Hooks()
@@ -838,18 +845,9 @@ def integrate(ctx, cfg, state_in, hooks=None):
             wtable.to_state(st)
         return ctx.write_checkpoint(st)
 
-    compiling = [compile_notice(system.step_kernel()), _time.perf_counter()]
-    if compiling[0]:
-        ctx.log(compiling[0])
-
-    def compiled():
-        if compiling[0]:
-            ctx.log(f"kernels ready after {_time.perf_counter() - compiling[1]:.0f} s")
-            compiling[0] = None
-
+    stepper = Stepper(ctx, system)
     if ckpt is None:
-        system.advance(0)  # loads at x_0 before the first record: a checkpoint at step 0 holds them too
-        compiled()
+        stepper.advance(0)  # loads at x_0 before the first record: a checkpoint at step 0 holds them too
         record()
         if snap_every:
             snapshot()
@@ -860,7 +858,6 @@ def integrate(ctx, cfg, state_in, hooks=None):
     t0 = _time.perf_counter()
     progress = ctx.progress(total, start_step, len(system.rad))
     forecast = _stop_forecast(cfg, hooks, dt, e_unit, nb)
-    governor = ThreadGovernor(ctx.runner.threads, ctx.log)
     chunk = min(rec_every, 200)
     stopped = ended or None
 
@@ -877,12 +874,7 @@ def integrate(ctx, cfg, state_in, hooks=None):
                 if snap_every:
                     nxt = min(nxt, (system.step // snap_every + 1) * snap_every)
                 n = min(chunk, nxt - system.step)
-                governor.threads()
-                c0 = _time.perf_counter()
-                status, done = system.advance(n)
-                elapsed = _time.perf_counter() - c0
-                governor.chunk_done(done, elapsed)
-                compiled()
+                status, done, elapsed = stepper.advance(n)
                 if status != K.OK:
                     ctx.fail(_diagnosis(ctx, system, status, dt, dt_crit, cfg), system, plan, last_good)
                 # chunks of about 0.5 s keep Ctrl-C and progress responsive; physics does not depend on them
@@ -905,12 +897,14 @@ def integrate(ctx, cfg, state_in, hooks=None):
     except KeyboardInterrupt:
         with interrupts.deferred(keep=False):  # a second Ctrl-C or SIGTERM does not cut the write short
             system.restore(last_good)
-            path = checkpoint()  # rows end at the last good step, which was taken right after a record
+            # rows end at the last good step, which was taken right after a record; a stop
+            # criterion that fired there ended the stepping
+            path = checkpoint(ended=stopped) if stopped else checkpoint()
         progress.close()
         raise StageError(f"stage {ctx.name} interrupted at step {system.step}; continue with --resume",
                          state_file=path) from None
     finally:
-        governor.close()
+        stepper.close()
     progress.close()
     wall = _time.perf_counter() - t0
     steps_run = system.step - start_step

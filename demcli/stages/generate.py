@@ -83,9 +83,7 @@ def _lattice(lo, hi, radii, planar):
     """Simple cubic lattice, spacing 2.02 r_max, filled x fastest."""
     a = 2.02 * radii.max()
     counts = _lattice_counts(lo, hi, a, planar)
-    idx = np.arange(len(radii))
-    if len(radii) > counts[0] * counts[1] * counts[2]:
-        return None
+    idx = np.arange(len(radii))  # (validation checks that the lattice has room: _case_check)
     pos = np.empty((len(radii), 3))
     pos[:, 0] = lo[0] + (idx % counts[0] + 0.5) * a
     pos[:, 1] = lo[1] + ((idx // counts[0]) % counts[1] + 0.5) * a
@@ -135,17 +133,13 @@ def run(ctx, cfg, state_in):
     template = None
     if cfg.clump is not None:
         t = np.array(cfg.clump.spheres, float)
-        template = t
-        if planar:
-            raise StageError("clumps are 3D only in this version; use dimension: 3")
+        template = t  # (2D clumps are refused at validation)
     env = radii * _envelope(cfg)  # the envelope radius used for placement
     lo, hi = _region_box(cfg.region)
     if planar:
         lo[2] = hi[2] = 0.5 * (lo[2] + hi[2])
     if cfg.placement == "lattice":
         pos = _lattice(lo, hi, env, planar)
-        if pos is None:
-            raise StageError(f"stage {ctx.name}: {n} particles do not fit a lattice in the region")
     else:
         cyl = None
         if cfg.region.shape == "cylinder":

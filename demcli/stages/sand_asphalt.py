@@ -41,6 +41,7 @@ from demcli.stages import dem
 from demcli.stages.base import ENGINE_KEEPS, ENGINE_OUTPUT, StageType, register_stage
 from demcli.state.fields import Field, register, register_group
 from demcli.state.records import describe_column
+from demcli.stepping import Stepper
 
 for _name, _label, _doc in [
         ("axial_strain", "Axial strain", "e_a = h / h0 - 1 of the platens' distance (tension positive, as the seed)"),
@@ -215,9 +216,10 @@ def run_prepare(ctx, cfg, state_in):
 
     def cycle(max_steps):
         done = 0
-        with interrupts.deferred() as poll:  # Ctrl-C and SIGTERM act between chunks, not inside one
+        # Ctrl-C and SIGTERM act between chunks, not inside one
+        with interrupts.deferred() as poll, Stepper(ctx, system) as stepper:
             while done < max_steps:
-                status, k = system.advance(min(200, max_steps - done))
+                status, k, _ = stepper.advance(min(200, max_steps - done))
                 if status != K.OK:
                     raise StageError(f"stage {ctx.name}: packing went unstable ({K.STATUS_TEXT[status]}) at step "
                                      f"{system.step}; lower dt_factor or kn")

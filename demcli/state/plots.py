@@ -147,10 +147,5 @@ def save_png(fig, path_png) -> bool:
     return True
 
 
-def plot_lines(path_png, series: dict, **style) -> bool:
-    """:func:`line_figure` of ``{legend: (x, y)}`` into a PNG; False when matplotlib is missing."""
-    return save_png(line_figure(series, **style), path_png)
-
-
-__all__ = ["DPI", "MARKER_COUNTS", "MARKER_POINTS", "axis_label", "drawable", "line_figure", "plot_lines", "pretty_unit",
+__all__ = ["DPI", "MARKER_COUNTS", "MARKER_POINTS", "axis_label", "drawable", "line_figure", "pretty_unit",
            "save_png"]

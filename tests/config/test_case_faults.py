@@ -336,6 +336,18 @@ def test_an_unknown_material_is_reported_with_the_other_errors(tmp_path):
     assert out.index("stages[0]") < out.index("stages[1]") < out.index("stages[2]")
 
 
+def test_a_case_rule_of_a_valid_stage_comes_with_a_typo_in_a_later_one(tmp_path, monkeypatch):
+    """The case rules (memory, scene, library fit) ran only once every field was valid: a
+    typo in the dem stage hid the memory refusal of the generate stage before it."""
+    from demcli.config import memory
+
+    monkeypatch.setattr(memory, "machine_memory", lambda: 8 * 2 ** 30)
+    text = GOOD.replace("count: 5", "count: 100000000").replace("time: {steps: 10}", "time: {stepz: 10}")
+    result, path = _check(tmp_path, text)
+    _refused(result, "invalid case (2 problems)", f"{path}:5: stages[0].count: the generated particles",
+             "stages[1].time.stepz: unknown key; did you mean 'steps'?")
+
+
 def test_unknown_materials_in_lists_and_named_keys_are_reported(tmp_path):
     text = GOOD.replace("time: {steps: 10}", "time: {steps: 10}\n    contact: {pairs: [{materials: [glass, stel], "
                                              "friction: 0.1}]}")

@@ -105,6 +105,22 @@ def test_interrupted_while_writing_outputs_checkpoints_the_finished_loop(tmp_pat
     _same_run(tmp_path / "ref", tmp_path / "run", h5_differences, "01-settle.h5")
 
 
+def test_interrupted_in_the_chunk_where_the_stop_criterion_fires(tmp_path, monkeypatch, h5_differences):
+    """Ctrl-C in the chunk whose record ends the stepping (here: the first record after 0.01 s,
+    by a kinetic ratio nothing fails): --resume does not step past the stop."""
+    from demcli.engine.system import System
+
+    stop = ["stages.settle.stop.kinetic_ratio=1e6", "stages.settle.stop.min_time=0.01 s"]
+    run_case(ROOT / SPHERES, out=tmp_path / "ref", quiet=True, overrides=stop)
+    restore = _send_sigint_once(monkeypatch, System, "advance", lambda s: s.step % 150 == 0 and s.time >= 0.01)
+    with pytest.raises(StageError, match="interrupted"):
+        run_case(ROOT / SPHERES, out=tmp_path / "run", quiet=True, overrides=stop)
+    restore()
+    run_case(ROOT / SPHERES, out=tmp_path / "run", quiet=True, resume=True, overrides=stop)
+    assert "stopped at rest" in (tmp_path / "ref" / "log.txt").read_text()
+    _same_run(tmp_path / "ref", tmp_path / "run", h5_differences, "01-settle.h5")
+
+
 def test_interrupted_while_the_state_is_written_finishes_the_write(reference, tmp_path, monkeypatch, h5_differences):
     """Ctrl-C during the state write: the write completes, the run stops right after with a
     message, and the next run finds the stage up to date."""

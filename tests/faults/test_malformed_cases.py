@@ -10,6 +10,7 @@ text; ``test_unmutated_dumps_are_valid`` shows that the round trip alone keeps e
 so each failure below comes from its mutation.
 """
 
+import re
 from pathlib import Path
 
 import pytest
@@ -253,11 +254,20 @@ def _write(tmp_path, stem, label, kind, base, mutate):
     return path
 
 
-def _assert_refused(result, path):
+WHOLE_FILE = ("too-large", "latin-1")  # faults of the file as a whole: named by file, no line
+
+
+def _assert_refused(result, path, label=""):
+    """Exit code 2, one clean message, and every problem named by file and line (``file:N:``)
+    or, for a file that cannot be read as a whole (size, encoding), by file alone."""
     assert result.exit_code == 2, result.output
     assert isinstance(result.exception, SystemExit), repr(result.exception)
     assert "Traceback" not in result.output
     assert "Error" in result.output and path.name in result.output, result.output
+    problems = [ln.strip() for ln in result.output.splitlines()[1:] if ln.strip()] or [result.output.strip()]
+    for line in problems:
+        where = "" if label in WHOLE_FILE else r":\d+"
+        assert re.match(rf"(Error: (invalid case \(1 problem\): )?)?{re.escape(str(path))}{where}: \S", line), line
 
 
 def test_the_suite_is_large():
@@ -281,8 +291,8 @@ def test_check_refuses_with_one_clean_message(tmp_path, stem, label, kind, base,
     path = _write(tmp_path, stem, label, kind, base, mutate)
     # When checked
     result = CliRunner().invoke(cli, ["check", str(path)])
-    # Then: exit code 2, "Error: ..." naming the file, no traceback
-    _assert_refused(result, path)
+    # Then: exit code 2, "Error: ..." naming the file and the line of each problem, no traceback
+    _assert_refused(result, path, label)
 
 
 RUN_SAMPLE = ["smoke-beads-compact-after-generate", "smoke-beads-count-1e9", "smoke-beads-box-max-below-min",

@@ -33,8 +33,11 @@ def _gas(scene, law, dt_factor):
                          gravity=(0.0, 0.0, -G), dt_factor=dt_factor)
 
 
-# tolerance (1e5 steps, 1e6 steps) and the values measured when written
-DRIFT = {"hertz_mindlin": (1e-3, 1e-2), "linear": (1e-2, 5e-2)}
+# tolerance (1e5 steps, 1e6 steps) and the values measured when written; the gas is chaotic, so
+# another CPU (another rounding) is another realisation of the random walk: over 1e5 steps the
+# Hertz gas's max drift was 3.2e-4 for seed 7 where written, 0.84e-3 to 1.71e-3 for seeds 1-8 on
+# another AMD EPYC (seed 7: 1.05e-3), hence 3e-3 (Hertz) at 1e5 steps
+DRIFT = {"hertz_mindlin": (3e-3, 1e-2), "linear": (1e-2, 5e-2)}
 
 
 @pytest.mark.parametrize("law", ["hertz_mindlin", "linear"])
@@ -50,7 +53,7 @@ def test_elastic_sphere_gas_energy_drift_stays_bounded(scene, law):
         assert status == K.OK
         drift.append((s.energy_record()["total"] - e0) / e0)
     drift = np.abs(drift)
-    # Then: |E - E0| / E0 stays below 1e-3 / 1e-2 (Hertz; measured 3.2e-4 over 1e5 steps, 4.3e-3 over
+    # Then: |E - E0| / E0 stays below 3e-3 / 1e-2 (Hertz; measured 3.2e-4 over 1e5 steps, 4.3e-3 over
     # 1e6, a slow upward trend: none at dt = 0.05 x critical, 2.9e-4 over 1e6) and 1e-2 / 5e-2
     # (linear; measured 4.0e-3, 3.2e-2). Every contact entry and exit costs or gains up to
     # (omega dt)^2 / 4 (1 % here for the linear law, whose force jumps in slope at contact; less

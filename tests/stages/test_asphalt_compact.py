@@ -144,3 +144,40 @@ def test_interrupted_compaction_resumes_bit_identically(compaction_case, tmp_pat
     a, b = _datasets(ref / "03-compact.h5"), _datasets(tmp_path / "03-compact.h5")
     assert sorted(a) == sorted(b)
     assert [k for k in a if not np.array_equal(np.asarray(a[k]), np.asarray(b[k]))] == []
+
+
+def test_compaction_interrupted_while_writing_its_outputs_keeps_its_stop_reason(tmp_path, monkeypatch):
+    """Ctrl-C while a compaction that stopped at its target porosity writes its figures: the
+    resumed stage writes the outputs only, and says why it stopped as the uninterrupted run."""
+    import os
+    import signal
+
+    from demcli.state import records
+
+    def edit(stages):
+        stages[3]["walls"][0]["motion"] = {"z1": {"mode": "velocity", "velocity": [0, 0, "-0.5 m/s"]}}
+        stages[3]["target"] = {"porosity": 0.75}
+
+    path = _case(tmp_path, 4, edit)
+    run_case(path, out=tmp_path / "ref", quiet=True, threads=1)
+    real = records.RecordTable.write_csv
+    sent = []
+
+    def write_csv(self, *args, **kwargs):
+        if self.name == "dem" and not sent:  # the compact stage's own record
+            sent.append(True)
+            os.kill(os.getpid(), signal.SIGINT)
+        return real(self, *args, **kwargs)
+
+    old = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        monkeypatch.setattr(records.RecordTable, "write_csv", write_csv)
+        with pytest.raises(StageError, match="interrupted while writing its outputs"):
+            run_case(path, out=tmp_path / "run", quiet=True, threads=1)
+        monkeypatch.setattr(records.RecordTable, "write_csv", real)
+        run_case(path, out=tmp_path / "run", quiet=True, threads=1, resume=True)
+    finally:
+        signal.signal(signal.SIGINT, old)
+    a, b = _datasets(tmp_path / "ref" / "03-compact.h5"), _datasets(tmp_path / "run" / "03-compact.h5")
+    assert "target porosity" in str(b["compaction/stopped"])
+    assert [k for k in a if not np.array_equal(np.asarray(a[k]), np.asarray(b[k]))] == [] and sorted(a) == sorted(b)

@@ -2,7 +2,6 @@
 shapes of the datasets on disk, and the checksums of datasets and attributes."""
 
 import struct
-import time
 
 import h5py
 import numpy as np
@@ -130,12 +129,11 @@ def test_value_rules_are_left_out_of_the_write_check(state):
     assert any("'bodies/mass' must be > 0" in p for p in check(state))
 
 
-def test_validation_of_a_large_state_is_cheap():
-    # Given 300 000 single-sphere bodies / When checked / Then it takes well under a second
+def test_a_large_valid_state_passes_every_rule():
+    # Given 300 000 single-sphere bodies (the cost is measured in the issue's note, not here:
+    # speed belongs in benchmarks) / When checked / Then no rule refuses it
     big = example_state(n_bodies=300_000, spheres_per_body=1, walls=False, contacts=False)
-    t0 = time.perf_counter()
     assert check(big) == []
-    assert time.perf_counter() - t0 < 1.0
 
 
 # --- item 8: dtype, rank and shape of what is on disk ----------------------------------
