@@ -4,7 +4,7 @@ VENV   ?= .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: run test test-nojit stress bench smoke clean-jit clean
+.PHONY: run test test-nojit stress bench smoke hashes guard clean-jit clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -31,6 +31,14 @@ bench: $(STAMP)
 ## smoke: every case file for a few steps
 smoke: $(STAMP)
 	$(BIN)/python -m pytest -q tests/test_cases.py
+
+## hashes: record the smoke cases' state hashes (before a change that must keep results)
+hashes: $(STAMP)
+	$(BIN)/python tests/guards/smoke_hashes.py record
+
+## guard: compare the smoke cases' states with the recorded hashes (after such a change)
+guard: $(STAMP)
+	$(BIN)/python tests/guards/smoke_hashes.py compare
 
 ## clean-jit: drop numba's compiled-kernel caches (each set of kernel sources has its own folder)
 clean-jit:

@@ -200,6 +200,7 @@ def run_proc(cmd, cwd, env, timeout):
     rec["process_s"] = time.perf_counter() - t0
     lines = [ln for ln in text.splitlines() if ln.strip()]
     rec["last"] = lines[-1] if lines else None
+    rec["lines"] = lines
     if lines and RATE.match(lines[-1]):
         rec["rate"] = float(RATE.match(lines[-1]).group(1))
     elif rec["error"] is None:
@@ -593,17 +594,22 @@ def main(argv=None):
     sieve = None if a.no_sieve else run_sieve(a.quick)
     asphalt = None if a.no_asphalt else run_asphalt(a)
     jit = None if (a.no_jit or a.quick) else run_jit(a)
-    # 2D sections; ballast library build rate; polyhedron narrow phase; a bonded specimen (no peer has these)
+    # 2D sections; ballast library build rate; polyhedron narrow phase; a bonded specimen; the quickstart's
+    # sleeper bed under its peak load, 1 and 2 threads (no peer has these)
     others = []
-    quick_args = {"bench_polygons.py": ["--quick"], "bench_library.py": ["--quick"], "bench_polyhedra.py": [],
-                  "bench_bonds.py": ["--steps", "2000"]}
-    for script, qargs in ({} if a.no_extras else quick_args).items():
-        cmd = [sys.executable, os.path.join(HERE, script)] + (qargs if a.quick else [])
+    extras = [("bench_polygons.py", [], ["--quick"]), ("bench_library.py", [], ["--quick"]),
+              ("bench_polyhedra.py", [], []), ("bench_bonds.py", [], ["--steps", "2000"]),
+              ("bench_loaded_bed.py", ["--threads", "1"], ["--threads", "1", "--repeat", "1"]),
+              ("bench_loaded_bed.py", ["--threads", "2"], ["--threads", "2", "--repeat", "1"])]
+    for script, args, qargs in ([] if a.no_extras else extras):
+        args = qargs if a.quick else args
+        cmd = [sys.executable, os.path.join(HERE, script)] + args
         print(f"  [{time.strftime('%H:%M:%S')}] {script} (load {load()}) ...", flush=True)
         rec = run_proc(cmd, ROOT, dict(env0), a.timeout)
         last = rec["last"] or rec["error"] or "no output"
-        print(f"    {last}", flush=True)
-        others.append((" ".join(["python", "bench/" + script] + (qargs if a.quick else [])), last))
+        text = next((ln for ln in reversed(rec["lines"]) if " body-steps/s" in ln), last)
+        print(f"    {text}", flush=True)
+        others.append((" ".join(["python", "bench/" + script] + args), text))
     load1 = load()
     digest1 = source_digest()
     git1 = sh("git -C " + shlex.quote(ROOT) + " rev-parse --short HEAD") or "?"

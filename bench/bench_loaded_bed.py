@@ -1,0 +1,97 @@
+"""Throughput of a settled, loaded polyhedral bed: the ballast box's real workload.
+
+Usage: python bench/bench_loaded_bed.py [CASE] [--steps N] [--repeat K] [--threads T]
+  default CASE: cases/quickstart.yaml (143 stones and the sleeper on its shoulders)
+
+The bed is built by the case itself: ``demcli run CASE`` up to and with its ``sleeper``
+stage, with one vibration and one sleeper cycle (``--set stages.vibrate.cycles=1 --set
+stages.sleeper.cycles=1``), in a cache folder (``$DEMCLI_BENCH_CACHE``, default
+``~/.cache/demcli/bench/<case name>``; made once, then reused while the case is unchanged:
+the pipeline skips up-to-date stages). From the sleeper stage's final state the benchmark
+builds the stage's engine (its physics, walls, scaling and time step) with the sleeper
+held at its peak load (the case's ``load.max``, constant), runs 200 steps for the contacts
+to take the load, then times K windows of N steps each on T threads and prints the median
+body-steps/s, the touching pairs per body and the cost per touching pair. The last line is
+``particle_steps_per_s=<median body-steps/s>`` (the bench runner's convention).
+"""
+
+import argparse
+import os
+import statistics
+import sys
+import time
+from pathlib import Path
+from types import SimpleNamespace
+
+HERE = Path(__file__).resolve().parent
+
+
+def loaded_state(case, folder):
+    """The sleeper stage's final state of ``case`` (run once into ``folder``)."""
+    from demcli import run_case
+    from demcli.state import read_state
+
+    res = run_case(case, out=folder, quiet=True,
+                   overrides=["stages.vibrate.cycles=1", "stages.sleeper.cycles=1"])
+    path = [r.path for r in res if r.name == "sleeper"][0]
+    return read_state(path)
+
+
+def loaded_system(case_path, state, threads):
+    """The sleeper stage's engine on ``state``, the sleeper at its constant peak load."""
+    import numba
+    import numpy as np
+
+    from demcli.config.case import load_case
+    from demcli.config.schema import Node
+    from demcli.stages import dem
+    from demcli.stages.base import load_stage_types
+
+    load_stage_types()
+    numba.set_num_threads(threads)
+    case = load_case(case_path)
+    cfg = case.stages[[s.name for s in case.stages].index("sleeper")]
+    dcfg = dict(cfg)
+    dcfg["time"] = Node({"steps": 1, "duration": None, "dt": cfg.time.dt, "dt_factor": cfg.time.dt_factor})
+    groups = dict(state.groups)
+    act = dict(groups["actors"])
+    down = np.array([0.0, 0.0, -1.0])
+    act["load_mean"] = np.tile(cfg.load.max * down, (len(act["body"]), 1))
+    act["load_amplitude"] = np.zeros_like(act["load_mean"])
+    groups["actors"] = act
+    system, _, dt, _ = dem.make_system(SimpleNamespace(case=case, name="bench", log=lambda m: None), Node(dcfg),
+                                       groups, time=0.0, step=0, resume=True)
+    system.dt = dt
+    return system
+
+
+def main(argv=None):
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("case", nargs="?", default=str(HERE.parent / "cases" / "quickstart.yaml"))
+    p.add_argument("--steps", type=int, default=200)
+    p.add_argument("--repeat", type=int, default=3)
+    p.add_argument("--threads", type=int, default=1)
+    a = p.parse_args(argv)
+    name = Path(a.case).stem
+    cache = Path(os.environ.get("DEMCLI_BENCH_CACHE", Path.home() / ".cache" / "demcli" / "bench")) / name
+    state = loaded_state(a.case, cache)
+    s = loaded_system(a.case, state, a.threads)
+    s.advance(200)  # the contacts take the peak load
+    rates = []
+    for _ in range(a.repeat):
+        t = time.perf_counter()
+        status, done = s.advance(a.steps)
+        rates.append(len(s.mass) * done / (time.perf_counter() - t))
+        if status:
+            sys.exit(f"the loaded bed went unstable (status {status})")
+    pairs, walls = s.contact_count()
+    med = statistics.median(rates)
+    per_pair = len(s.mass) / med / max(pairs, 1)
+    print(f"{name} sleeper bed, {len(s.mass)} bodies, {a.threads} thread(s): {med:.4g} body-steps/s "
+          f"(runs {', '.join(f'{r:.4g}' for r in rates)}); {pairs} touching pairs ({2 * pairs / len(s.mass):.2f} "
+          f"per body), {walls} wall contacts; {per_pair * 1e6:.3g} us per touching pair-step")
+    print(f"particle_steps_per_s={med:.6g}")
+
+
+if __name__ == "__main__":
+    main()
