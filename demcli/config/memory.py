@@ -8,6 +8,7 @@ generous (:data:`BYTES_PER_SPHERE`), so a case refused here could not have run.
 import os
 
 from demcli.config.schema import NOVALUE
+from demcli.errors import InputError
 
 BYTES_PER_SPHERE = 3072
 """Bytes per sphere of a scene the engine integrates, rounded up: the sphere's arrays and its
@@ -30,9 +31,31 @@ def _cgroup_limit():
     return int(text) if text.isdigit() else None
 
 
+def declared_memory():
+    """``$DEMCLI_MEMORY`` in bytes (``256 GiB``, ``64GB``, ``2e11``): the memory of the machine
+    that will run the case, for a check made elsewhere (a cluster's login node); None unset."""
+    text = os.environ.get("DEMCLI_MEMORY", "").strip()
+    if not text:
+        return None
+    units = {"kib": 2 ** 10, "mib": 2 ** 20, "gib": 2 ** 30, "tib": 2 ** 40, "kb": 1e3, "mb": 1e6, "gb": 1e9,
+             "tb": 1e12, "b": 1, "": 1}
+    number = text.rstrip("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ ")
+    unit = text[len(number):].strip().lower()
+    try:
+        value = float(number) * units[unit]
+    except (ValueError, KeyError):
+        raise InputError(f"DEMCLI_MEMORY={text!r}: give bytes or a number with KiB, MiB, GiB, TiB, kB, MB, GB or TB, "
+                         "e.g. DEMCLI_MEMORY='256 GiB'") from None
+    return value if value > 0 else None
+
+
 def machine_memory():
-    """Bytes of memory this process can use: the machine's physical memory, or less where an
-    address-space limit or a cgroup says so; None where unknown."""
+    """Bytes of memory this process can use: ``$DEMCLI_MEMORY`` when set (:func:`declared_memory`),
+    else the machine's physical memory, or less where an address-space limit or a cgroup says
+    so; None where unknown."""
+    declared = declared_memory()
+    if declared is not None:
+        return declared
     limits = [_cgroup_limit()]
     try:
         limits.append(os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE"))
@@ -63,4 +86,5 @@ def check_memory(report, key, count, what, value=NOVALUE, kind="spheres", bytes_
         return
     report(key, f"{what}: about {float(count):.3g} {kind} need an estimated {_gib(need)} of memory "
                 f"({bytes_each} bytes each), more than this machine's {_gib(available)}", value,
-           "make the scene smaller (fewer or larger particles)")
+           "make the scene smaller (fewer or larger particles), or, checking for a bigger machine, "
+           "set DEMCLI_MEMORY to its memory (e.g. DEMCLI_MEMORY='256 GiB')")

@@ -404,3 +404,21 @@ def test_compare_takes_a_comma_list_of_columns(tmp_path):
     assert result.exit_code == 0, result.output
     for col in ("kinetic", "contacts"):
         assert (tmp_path / "cmp" / f"settle_dem_{col}.csv").exists()
+
+
+@pytest.mark.parametrize("text, value", [("256 GiB", 256 * 2 ** 30), ("64GB", 64e9), ("2e11", 2e11)])
+def test_the_memory_of_another_machine_can_be_declared(monkeypatch, text, value):
+    # Given a check made on a login node for a compute node (DEMCLI_MEMORY)
+    from demcli.config import memory
+
+    monkeypatch.setenv("DEMCLI_MEMORY", text)
+    assert memory.machine_memory() == value
+
+
+def test_a_count_the_declared_machine_holds_passes_and_a_bad_declaration_is_named(tmp_path, monkeypatch):
+    monkeypatch.setenv("DEMCLI_MEMORY", "1 TiB")
+    result, _ = _check(tmp_path, GOOD.replace("count: 5", "count: 100000000"))
+    assert result.exit_code == 0, result.output
+    monkeypatch.setenv("DEMCLI_MEMORY", "lots")
+    result, _ = _check(tmp_path, GOOD)
+    _refused(result, "DEMCLI_MEMORY='lots': give bytes")
