@@ -738,55 +738,16 @@ def _restore(system, groups):
 def integrate(ctx, cfg, state_in, hooks=None):
     """The ``dem`` stage loop on ``cfg`` (the dem schema's keys), with a stage's ``hooks``."""
     from demcli.kernels import layout as K
-    from demcli.state import RecordTable
-    ckpt = ctx.load_checkpoint()
-    source = ckpt if ckpt is not None else state_in
-    groups = source.groups
-    if ckpt is not None and "phases" in state_in.groups:
-        # input data the checkpoint does not repeat (bonds.from_phases reads its models there)
-        groups = {**groups, "phases": state_in.groups["phases"]}
-    system, plan, dt, dt_crit = make_system(ctx, cfg, groups, time=float(source.meta.get("time", 0.0)) if ckpt
-                                            else 0.0, step=int(source.meta.get("step", 0)) if ckpt else 0,
-                                            resume=ckpt is not None)
-    if ckpt is not None:
-        _restore(system, groups)
-    else:
-        system.ke_limit = cfg.safety.energy_limit * reference_energy(system)
+
     hooks = hooks or Hooks()
-    if hooks.timing is not None:
-        dt, total, rec_every = hooks.timing(system, dt, dt_crit)
-        system.dt = dt
-    else:
-        total = cfg.time.steps if cfg.time.steps is not None else int(math.ceil(cfg.time.duration / dt))
-        rec_every = max(1, total // cfg.output.records)
+    ckpt, system, plan, dt, dt_crit, total, rec_every = _setup(ctx, cfg, state_in, hooks)
     if hooks.start is not None:
         hooks.start(system, ckpt)
     ctx.log(f"dt = {dt:.4g} s = {dt / dt_crit:.3g} x critical {dt_crit:.4g} s; "
             f"effects: {', '.join(sorted(plan.effects)) or 'none'}")
     snap_every = max(1, total // cfg.output.snapshots) if cfg.output.snapshots else 0
     energy = plan.has("energy")
-    cols = {"time": "s", "step": "1", "kinetic": "J", "contacts": "1", "wall_contacts": "1",
-            "coordination": "1"}
-    if energy:
-        cols.update({k: "J" for k in ("strain", "gravity", "damping", "friction", "body_damping", "wall_work",
-                                      "total")})
-    if plan.has("adaptive_damping"):
-        cols["alpha"] = "1/s"
-    if plan.has("bonds"):
-        cols.update({"bonds_intact": "1", "broken_tension": "1", "broken_shear": "1", "bonds_seated": "1"})
-    cols.update(hooks.columns)
-    if ckpt is not None:
-        table = RecordTable.from_state(ckpt, "dem")
-        wtable = RecordTable.from_state(ckpt, "walls") if len(system.walls) else None
-    else:
-        table = RecordTable("dem", cols)
-        wtable = None
-        if len(system.walls):
-            wcols = {"time": "s"}
-            for name in system.walls.name:
-                wcols[f"{name}.position"] = "m"
-                wcols[f"{name}.force"] = "N"
-            wtable = RecordTable("walls", wcols)
+    table, wtable = _tables(ckpt, system, plan, hooks)
     ended = None if ckpt is None else ckpt.groups["checkpoint"].get("ended")  # the loop had ended: why
     ended = None if ended is None else str(ended)
     snaps = _Snapshots(ctx.snapshot_dir, plan.has("polyhedra"), resume=ckpt is not None)
@@ -798,52 +759,13 @@ def integrate(ctx, cfg, state_in, hooks=None):
     e_unit = float(system.mass.mean()) * g * d_mean
 
     def record():
-        ke = system.kinetic_energy()
-        npp, npw = system.contact_count()
-        row = {"time": system.time, "step": system.step, "kinetic": ke, "contacts": npp, "wall_contacts": npw,
-               "coordination": (2.0 * npp + npw) / max(nb, 1)}
-        if energy:
-            row.update(system.energy_record())
-            row["kinetic"] = ke
-        if plan.has("adaptive_damping"):
-            row["alpha"] = system.alpha
-        if plan.has("bonds"):
-            c = system.bonds.counts()
-            row.update({"bonds_intact": c["intact"], "broken_tension": c["broken_tension"],
-                        "broken_shear": c["broken_shear"], "bonds_seated": int(system.bonds.seated().sum())})
-        if hooks.row is not None:
-            row.update(hooks.row(system))
-        table.append(row)
-        if wtable is not None:
-            wrow = {"time": system.time}
-            for k, name in enumerate(system.walls.name):
-                n = system.walls.normal[k]
-                wrow[f"{name}.position"] = float(system.wpoint[k] @ n)
-                wrow[f"{name}.force"] = float(-system.wforce[k] @ n)
-            wtable.append(wrow)
-        return row
+        return _record(system, plan, hooks, table, wtable)
 
     def snapshot():
         snaps.write(ctx.state_from(system, plan, extra=None))
 
     def checkpoint(ended=None):
-        """Write the checkpoint of the current state, which must be right after a record
-        (``ended``: why the stepping ended, "" for all steps done, when it has)."""
-        extra = {"checkpoint": {
-            "losses0": np.array([system.losses0[k] for k in ("damping", "friction", "body_damping", "wall_work")]),
-            "esph": system.esph.copy(), "ebody": system.ebody.copy(), "eacc": system.eacc.copy(),
-            "ke_limit": np.array([system.ke_limit])}}
-        if ended is not None:
-            extra["checkpoint"]["ended"] = ended
-        if len(system.walls):
-            from demcli.kernels.walls import W_RATE
-
-            extra["checkpoint"]["wall_rate"] = system.walls.prm[:, W_RATE].copy()
-        st = ctx.state_from(system, plan, extra=extra)
-        table.to_state(st)
-        if wtable is not None:
-            wtable.to_state(st)
-        return ctx.write_checkpoint(st)
+        return _checkpoint(ctx, system, plan, table, wtable, ended)
 
     stepper = Stepper(ctx, system)
     if ckpt is None:
@@ -920,6 +842,109 @@ def integrate(ctx, cfg, state_in, hooks=None):
             path = checkpoint(ended=stopped or "")
         raise StageError(f"stage {ctx.name} interrupted while writing its outputs (its {system.step} steps are done); "
                          "continue with --resume", state_file=path) from None
+
+
+def _setup(ctx, cfg, state_in, hooks):
+    """The stage's system on its input, or on its checkpoint when it resumes: (checkpoint or
+    None, system, plan, dt, critical dt, last step, steps between records)."""
+    ckpt = ctx.load_checkpoint()
+    source = ckpt if ckpt is not None else state_in
+    groups = source.groups
+    if ckpt is not None and "phases" in state_in.groups:
+        # input data the checkpoint does not repeat (bonds.from_phases reads its models there)
+        groups = {**groups, "phases": state_in.groups["phases"]}
+    system, plan, dt, dt_crit = make_system(ctx, cfg, groups, time=float(source.meta.get("time", 0.0)) if ckpt
+                                            else 0.0, step=int(source.meta.get("step", 0)) if ckpt else 0,
+                                            resume=ckpt is not None)
+    if ckpt is not None:
+        _restore(system, groups)
+    else:
+        system.ke_limit = cfg.safety.energy_limit * reference_energy(system)
+    if hooks.timing is not None:
+        dt, total, rec_every = hooks.timing(system, dt, dt_crit)
+        system.dt = dt
+    else:
+        total = cfg.time.steps if cfg.time.steps is not None else int(math.ceil(cfg.time.duration / dt))
+        rec_every = max(1, total // cfg.output.records)
+    return ckpt, system, plan, dt, dt_crit, total, rec_every
+
+
+def _tables(ckpt, system, plan, hooks):
+    """The ``dem`` and ``walls`` record tables (``walls`` None without walls): a resumed
+    stage's from its checkpoint, else new ones with the columns of the plan's effects and of
+    the stage's hooks."""
+    from demcli.state import RecordTable
+
+    if ckpt is not None:
+        return RecordTable.from_state(ckpt, "dem"), RecordTable.from_state(ckpt, "walls") if len(system.walls) else None
+    cols = {"time": "s", "step": "1", "kinetic": "J", "contacts": "1", "wall_contacts": "1", "coordination": "1"}
+    if plan.has("energy"):
+        cols.update({k: "J" for k in ("strain", "gravity", "damping", "friction", "body_damping", "wall_work",
+                                      "total")})
+    if plan.has("adaptive_damping"):
+        cols["alpha"] = "1/s"
+    if plan.has("bonds"):
+        cols.update({"bonds_intact": "1", "broken_tension": "1", "broken_shear": "1", "bonds_seated": "1"})
+    cols.update(hooks.columns)
+    wtable = None
+    if len(system.walls):
+        wcols = {"time": "s"}
+        for name in system.walls.name:
+            wcols[f"{name}.position"] = "m"
+            wcols[f"{name}.force"] = "N"
+        wtable = RecordTable("walls", wcols)
+    return RecordTable("dem", cols), wtable
+
+
+def _record(system, plan, hooks, table, wtable):
+    """One row into each table, now: the ``dem`` row (kinetic energy, contacts, coordination,
+    the effects' and the hooks' columns) and the walls' positions and forces (docs/records.md
+    gives their signs); returns the ``dem`` row."""
+    nb = len(system.mass)
+    ke = system.kinetic_energy()
+    npp, npw = system.contact_count()
+    row = {"time": system.time, "step": system.step, "kinetic": ke, "contacts": npp, "wall_contacts": npw,
+           "coordination": (2.0 * npp + npw) / max(nb, 1)}
+    if plan.has("energy"):
+        row.update(system.energy_record())
+        row["kinetic"] = ke
+    if plan.has("adaptive_damping"):
+        row["alpha"] = system.alpha
+    if plan.has("bonds"):
+        c = system.bonds.counts()
+        row.update({"bonds_intact": c["intact"], "broken_tension": c["broken_tension"],
+                    "broken_shear": c["broken_shear"], "bonds_seated": int(system.bonds.seated().sum())})
+    if hooks.row is not None:
+        row.update(hooks.row(system))
+    table.append(row)
+    if wtable is not None:
+        wrow = {"time": system.time}
+        for k, name in enumerate(system.walls.name):
+            n = system.walls.normal[k]
+            wrow[f"{name}.position"] = float(system.wpoint[k] @ n)
+            wrow[f"{name}.force"] = float(-system.wforce[k] @ n)
+        wtable.append(wrow)
+    return row
+
+
+def _checkpoint(ctx, system, plan, table, wtable, ended=None):
+    """Write the checkpoint of the system's current state, which must be right after a record
+    (``ended``: why the stepping ended, "" for all steps done, when it has); returns its path."""
+    extra = {"checkpoint": {
+        "losses0": np.array([system.losses0[k] for k in ("damping", "friction", "body_damping", "wall_work")]),
+        "esph": system.esph.copy(), "ebody": system.ebody.copy(), "eacc": system.eacc.copy(),
+        "ke_limit": np.array([system.ke_limit])}}
+    if ended is not None:
+        extra["checkpoint"]["ended"] = ended
+    if len(system.walls):
+        from demcli.kernels.walls import W_RATE
+
+        extra["checkpoint"]["wall_rate"] = system.walls.prm[:, W_RATE].copy()
+    st = ctx.state_from(system, plan, extra=extra)
+    table.to_state(st)
+    if wtable is not None:
+        wtable.to_state(st)
+    return ctx.write_checkpoint(st)
 
 
 def _stop_forecast(cfg, hooks, dt, e_unit, nb):
