@@ -44,7 +44,7 @@ def loaded_system(case_path, state, threads):
 
     from demcli.config.case import load_case
     from demcli.config.schema import Node
-    from demcli.stages import dem
+    from demcli.stages import loop
     from demcli.stages.base import load_stage_types
 
     load_stage_types()
@@ -59,7 +59,7 @@ def loaded_system(case_path, state, threads):
     act["load_mean"] = np.tile(cfg.load.max * down, (len(act["body"]), 1))
     act["load_amplitude"] = np.zeros_like(act["load_mean"])
     groups["actors"] = act
-    system, _, dt, _ = dem.make_system(SimpleNamespace(case=case, name="bench", log=lambda m: None), Node(dcfg),
+    system, _, dt, _ = loop.make_system(SimpleNamespace(case=case, name="bench", log=lambda m: None), Node(dcfg),
                                        groups, time=0.0, step=0, resume=True)
     system.dt = dt
     return system

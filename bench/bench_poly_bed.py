@@ -25,7 +25,7 @@ def main(argv=None):
     n = int(argv[2]) if len(argv) > 2 else 30
     from demcli.config.case import load_case
     from demcli.kernels.poly_step import P_SEP, SEP_DIR, SEP_NONE
-    from demcli.stages import dem
+    from demcli.stages import loop
     from demcli.stages.base import load_stage_types
     from demcli.state import read_state
 
@@ -36,7 +36,7 @@ def main(argv=None):
     ctx = SimpleNamespace(case=case, name="bench")
 
     def build():
-        s, _, dt, _ = dem.make_system(ctx, cfg, st.groups)
+        s, _, dt, _ = loop.make_system(ctx, cfg, st.groups)
         s.dt = dt
         s.advance(2)
         return s

@@ -1,6 +1,6 @@
 """``compact`` stage: rigid box walls press the carved aggregates (seed 000, step 7).
 
-Built on the ``dem`` stage loop (:func:`demcli.stages.dem.integrate`), so it takes every
+Built on the ``dem`` stage loop (:func:`demcli.stages.loop.integrate`), so it takes every
 key of a ``dem`` stage (physics, contact, walls, time, output, neighbors, safety) and
 adds ``target``. The walls must include one closed ``box`` wall; its faces move as the
 box's ``motion`` map says: the seed's compaction is ``motion: {z1: {mode: servo, stress:
@@ -48,7 +48,7 @@ import numpy as np
 
 from demcli.config.schema import Float, Int, Optional, Section, Str
 from demcli.errors import InputError
-from demcli.stages import dem
+from demcli.stages import dem, loop
 from demcli.stages import asphalt_common  # noqa: F401  (registers the seeds and aggregates groups)
 from demcli.stages.base import ENGINE_KEEPS, ENGINE_OUTPUT, StageType, register_stage
 from demcli.state.fields import Field, register, register_group
@@ -115,7 +115,7 @@ def _check(node, report):
 
 
 class Porosity:
-    """Hooks for :func:`demcli.stages.dem.integrate`: porosity and face stresses, servo switching, stop rules.
+    """Hooks for :func:`demcli.stages.loop.integrate`: porosity and face stresses, servo switching, stop rules.
 
     What it changes in the system, the servo faces' control mode, speed limit (m/s) and
     loaded area (m^2), is a function of its record rows and the wall positions; a resumed
@@ -306,9 +306,9 @@ def run(ctx, cfg, state_in):
 
     columns = {"porosity": "1", "box_volume": "m^3", "stress_x": "Pa", "stress_y": "Pa", "stress_z": "Pa"}
     columns.update({f"stress_{f}": "Pa" for f in box.motion if box.motion[f].mode == "servo"})
-    hooks = dem.Hooks(columns=columns, start=start, row=lambda system: hook["p"].row(system),
+    hooks = loop.Hooks(columns=columns, start=start, row=lambda system: hook["p"].row(system),
                       stop=lambda system, rec: hook["p"].stop(system, rec), finish=finish)
-    return dem.integrate(ctx, cfg, state_in, hooks)
+    return loop.integrate(ctx, cfg, state_in, hooks)
 
 
 def _carve_scene(case, k):

@@ -1,7 +1,7 @@
 """Ballast box stages (seed 002, Shao, Lian & Yang 2017, sec. 4): ``deposit``, ``vibrate``, ``sleeper``.
 
 All three run the polyhedral engine through the ``dem`` stage loop
-(:func:`demcli.stages.dem.integrate`) and take every key of a ``dem`` stage
+(:func:`demcli.stages.loop.integrate`) and take every key of a ``dem`` stage
 (physics, contact, walls, time, output, neighbors, scaling, safety); their walls must
 include one ``box`` wall, the ballast box. They carry the ``gradation`` and ``library``
 groups of their input forward, so that a later stage can draw more ballast.
@@ -42,7 +42,7 @@ import numpy as np
 
 from demcli.config.schema import Bool, Float, Int, Node, Optional, Section, Str, Vector
 from demcli.errors import InputError
-from demcli.stages import dem
+from demcli.stages import dem, loop
 from demcli.stages.base import ENGINE_KEEPS, ENGINE_OUTPUT, StageType, register_stage
 from demcli.state.fields import Field, register, register_group
 from demcli.state.records import describe_column
@@ -248,9 +248,9 @@ def run_deposit(ctx, cfg, state_in):
         ctx_.write_records(table, x="time", ys=["bulk_density"], suffix="density")
         _log_bed(ctx_, "deposited", meas)
 
-    hooks = dem.Hooks(columns={"height": "m", "bulk_density": "kg/m^3", "porosity": "1", "void_ratio": "1"},
+    hooks = loop.Hooks(columns={"height": "m", "bulk_density": "kg/m^3", "porosity": "1", "void_ratio": "1"},
                       row=row, finish=finish)
-    return dem.integrate(ctx, cfg, state_in, hooks)
+    return loop.integrate(ctx, cfg, state_in, hooks)
 
 
 # ---------------------------------------------------------------------------------------
@@ -337,12 +337,12 @@ def _cyclic(ctx, cfg, state_in, actor, measure, columns, stop=None, finish_extra
     def watch(r):  # what `stop` tests, at the cycle ends where it tests it (the ETA follows its trend)
         return r[target[0]] if is_cycle_end(r) and round(r["cycle"]) >= 1 else None
 
-    hooks = dem.Hooks(columns={"cycle": "1", **columns}, row=row, stop=stop_hook, finish=finish, timing=timing,
+    hooks = loop.Hooks(columns={"cycle": "1", **columns}, row=row, stop=stop_hook, finish=finish, timing=timing,
                       watch=watch if target is not None else None, target=target and target[1:])
     dcfg = dict(cfg)
     dcfg["time"] = Node({"steps": 1, "duration": None, "dt": cfg.time.dt, "dt_factor": cfg.time.dt_factor})
     dcfg["stop"] = None
-    return dem.integrate(ctx, Node(dcfg), state_in, hooks)
+    return loop.integrate(ctx, Node(dcfg), state_in, hooks)
 
 
 def _actor_bottom(groups, b):

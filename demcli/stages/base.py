@@ -15,7 +15,7 @@ from dataclasses import dataclass
 STAGE_TYPES = {}
 
 ENGINE_OUTPUT = ("bodies/*", "spheres/*", "contacts/*", "wall_contacts/*", "walls/*", "energy/*", "records/*")
-"""What a stage that integrates the scene (:func:`demcli.stages.dem.integrate`) writes."""
+"""What a stage that integrates the scene (:func:`demcli.stages.loop.integrate`) writes."""
 
 ENGINE_KEEPS = ("polyhedra", "polyhedron_shapes", "bonds", "bond_models")
 """Input groups the integrated scene carries on when the input has them."""

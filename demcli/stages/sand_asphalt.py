@@ -37,7 +37,7 @@ import numpy as np
 from demcli import interrupts
 from demcli.config.schema import Float, Int, List, Optional, Section, Str, Tagged
 from demcli.errors import InputError, StageError
-from demcli.stages import dem
+from demcli.stages import dem, loop
 from demcli.stages.base import ENGINE_KEEPS, ENGINE_OUTPUT, StageType, register_stage
 from demcli.state.fields import Field, register, register_group
 from demcli.state.records import describe_column
@@ -286,7 +286,7 @@ def run_prepare(ctx, cfg, state_in):
                              "coordination": np.float64(z), "isotropic_stress": np.float64(p)}
     table.to_state(st)
     ctx.write_records(table, x="steps", ys=["isotropic_stress"], logy=True)
-    snaps = dem._Snapshots(ctx.snapshot_dir, False, resume=False)
+    snaps = loop.StageSnapshots(ctx.snapshot_dir, False, resume=False)
     snaps.write(st)
     return st
 
@@ -440,8 +440,8 @@ def run_creep(ctx, cfg, state_in):
                  f"{rows['axial_strain'][-1]:.4g} after {cfg.duration:g} s; dilation gradient {slope:.3g} "
                  f"between e_d = {cfg.dilation_window[0]:g} and {cfg.dilation_window[1]:g}")
 
-    hooks = dem.Hooks(columns=cols, row=row, finish=finish)
-    return dem.integrate(ctx, Node(dcfg), state_in, hooks)
+    hooks = loop.Hooks(columns=cols, row=row, finish=finish)
+    return loop.integrate(ctx, Node(dcfg), state_in, hooks)
 
 
 register_group("creep_result", "Summary of a creep test (seed 003)", writer="stage creep")
