@@ -46,34 +46,24 @@ def make_plan(declared, clumps=False, walls=False, polyhedra=False, bonds=False)
         walls: the stage has walls.
         polyhedra: the state's bodies are convex polyhedra.
         bonds: the state holds bonds.
+
+    The implied effects are those whose registry ``source`` is 'walls' or 'bonds', and the
+    shape effect of the bodies (clumps, polyhedra); the kernel switches are the ``flag`` of
+    every active effect, in the order of ``layout.FLAG_NAMES``.
     """
     active = set(declared)
     unknown = active - set(EFFECTS)
     if unknown:
         raise ValueError(f"unknown effects: {sorted(unknown)}")
-    if polyhedra:
-        active.add("polyhedra")
-    elif clumps:
-        active.add("clumps")
-    if walls:
-        active.add("walls")
-    if bonds:
-        active.add("bonds")
+    shape = "polyhedra" if polyhedra else "clumps" if clumps else "spheres"
+    implied = {"walls": walls, "bonds": bonds}
+    active |= {s.name for s in EFFECTS.values() if implied.get(s.source) or (s.source == "shape" and s.name == shape)}
     passes = list(BASE_PASSES)
     fields = list(BASE_FIELDS)
     for name in sorted(active):
         spec = EFFECTS[name]
         passes += [p for p in spec.passes if p not in passes]
         fields += [f for f in spec.fields if f not in fields]
-    flags = [False] * K.N_FLAGS
-    flags[K.F_CLUMPS] = "clumps" in active
-    flags[K.F_FRICTION] = "friction" in active
-    flags[K.F_ROLLING] = "rolling_resistance" in active
-    flags[K.F_ENERGY] = "energy" in active
-    flags[K.F_PLANAR] = "planar" in active
-    flags[K.F_GRAVITY] = "gravity" in active
-    flags[K.F_LOCAL] = "local_damping" in active
-    flags[K.F_VISCOUS] = "viscous_damping" in active
-    flags[K.F_WALLS] = "walls" in active
-    flags[K.F_BONDS] = "bonds" in active
-    return Plan(frozenset(active), tuple(flags), tuple(passes), tuple(fields))
+    switched = {EFFECTS[name].flag for name in active}
+    flags = tuple(name in switched for name in K.FLAG_NAMES)
+    return Plan(frozenset(active), flags, tuple(passes), tuple(fields))

@@ -1,8 +1,12 @@
 """Constants shared by the step kernel and the Python plan (importing this loads no numba)."""
 
-# kernel switches: index into the flags tuple (all bool)
-F_CLUMPS, F_FRICTION, F_ROLLING, F_ENERGY, F_PLANAR, F_GRAVITY, F_LOCAL, F_VISCOUS, F_WALLS, F_BONDS = range(10)
-N_FLAGS = 10
+# kernel switches of the one body engine: index into the flags tuple (all bool), set by the plan
+# from the effect registry (demcli.effects.registry: each effect names its flag)
+FLAG_NAMES = ("clumps", "friction", "rolling", "energy", "planar", "gravity", "local", "viscous", "bonds",
+              "dashpot", "adaptive")
+(F_CLUMPS, F_FRICTION, F_ROLLING, F_ENERGY, F_PLANAR, F_GRAVITY, F_LOCAL, F_VISCOUS, F_BONDS,
+ F_DASHPOT, F_ADAPTIVE) = range(len(FLAG_NAMES))
+N_FLAGS = len(FLAG_NAMES)
 
 # pass counters: one increment per executed pass per step
 COUNTERS = ("kick", "members", "wallmove", "rebuild", "pairs", "gather", "body", "wallctrl", "check",
@@ -19,10 +23,10 @@ STATUS_TEXT = {OK: "ok", BAD_NUMBER: "NaN or Inf in the body state", BAD_OVERLAP
 # body flag bits
 FIX_TRANSLATION = 1
 FIX_ROTATION = 2
-FIX_X = 4          # velocity component x held at its value (polyhedra: FIX_X << d for axis d)
+FIX_X = 4          # velocity component x held at its value (FIX_X << d for axis d)
 FIX_Y = 8
 FIX_Z = 16
-LOADED = 32        # polyhedra: the body carries a prescribed external force (its row of the load table)
+LOADED = 32        # an actor: the body carries a prescribed external force (its row of the load table)
 
 # positions in the neighbour-state tuple ``nl`` of :func:`demcli.kernels.step.run_steps`
 NL_FIELDS = ("start", "pi", "pj", "rstart", "rlist", "ft", "mr", "fc", "tj", "act", "epair",

@@ -11,6 +11,7 @@ import math
 import numpy as np
 
 from demcli.config.schema import Bool, Float, Int, List, Map, Optional, Section, Str, Tagged, Vector
+from demcli.effects import declared, physics_section, shape_refusals
 from demcli.errors import InputError, StateError
 from demcli.stages.base import ENGINE_KEEPS, ENGINE_OUTPUT, StageType, has_field, register_stage
 
@@ -124,19 +125,7 @@ BONDS = Optional(Section({
 }), doc="bonds between spheres (a state that holds bonds keeps them active without this key)")
 
 FIELDS = {
-    "physics": Section({
-        "gravity": Optional(Vector(3, "m/s^2"), doc="gravity vector; omit for none"),
-        "friction": Bool(default=False, doc="tangential springs with Coulomb slip"),
-        "rolling_resistance": Bool(default=False, doc="rolling resistance from material rolling_friction"),
-        "local_damping": Optional(Float(min=0, max=1, max_inclusive=False), doc="Cundall local damping lambda"),
-        "viscous_damping": Optional(Float("Hz", min=0), doc="mass-proportional damping alpha"),
-        "contact_damping": Bool(default=False, doc="polyhedra: normal dashpot from the material restitution "
-                                "(sphere laws always have theirs)"),
-        "adaptive_damping": Optional(Section({
-            "initial": Float("Hz", min=0, min_inclusive=False, default=0.1, doc="starting alpha"),
-        }), doc="polyhedra: mass-proportional damping adapted by R = E_a/|dE_k| (seed 002)"),
-        "energy": Bool(default=False, doc="energy book-keeping (losses, wall work, balance)"),
-    }, default={}, doc="the effects this stage simulates; nothing else runs"),
+    "physics": physics_section(),  # one key per effect of the registry (demcli.effects.registry)
     "contact": Section({
         "law": Str(choices=["hertz_mindlin", "linear"], default="hertz_mindlin"),
         "kn": Optional(Float("N/m", min=0, min_inclusive=False), doc="linear: normal stiffness"),
@@ -253,24 +242,31 @@ def _check_wall_mode(wall_type, motion, where, report):
 
 
 def scene_check(cfg, case, k, scene, report):
-    """The stage's physics against its input scene, known from the earlier stages' outputs:
-    polyhedra take gravity, friction and damping only (no energy book-keeping, rolling
-    resistance, 2D or bonds); adaptive and contact damping are for polyhedra."""
+    """The stage's effects against the shape of its input's bodies, known from the earlier
+    stages' outputs (polyhedra, or spheres which may be clumps): each effect the registry
+    does not run on that shape is refused with its reason (:func:`demcli.effects.shape_refusals`)."""
     if scene is None:
         return
-    physics = cfg.physics
-    if not has_field(scene, "polyhedra/shape"):
-        for key in ("adaptive_damping", "contact_damping"):
-            if physics[key] not in (None, False):
-                report(f"physics.{key}", "is for polyhedral bodies only; the input holds spheres", physics[key])
-        return
-    for key in ("energy", "rolling_resistance"):
-        if physics[key]:
-            report(f"physics.{key}", "is for spheres; the input holds polyhedral bodies", physics[key])
-    if case.dimension == 2:
-        report("", "the input holds polyhedral bodies, which are 3D; the case has dimension 2")
-    if cfg.get("bonds") is not None or has_field(scene, "bonds/i"):
-        report("bonds" if cfg.get("bonds") is not None else "", "bonds join spheres; the input holds polyhedra")
+    shapes = ("polyhedra",) if has_field(scene, "polyhedra/shape") else ("spheres", "clumps")
+    names = stage_effects(cfg, case.dimension, bonded=has_field(scene, "bonds/i"))
+    for spec, msg in shape_refusals(names, shapes):
+        if spec.key:
+            report(f"physics.{spec.key}", msg, cfg.physics[spec.key])
+        elif spec.name == "bonds" and cfg.get("bonds") is not None:
+            report("bonds", msg)
+        else:
+            report("", f"{spec.declared_by} (effect {spec.name}) {msg}")
+
+
+def stage_effects(cfg, dimension, bonded):
+    """The effects a stage runs but for its bodies' shape: the declared ones, walls when it
+    has walls, bonds when ``bonded`` (its input holds bonds) or it has a bonds section."""
+    names = declared_effects(cfg, dimension)
+    if len(cfg.get("walls", ())):
+        names.append("walls")
+    if bonded or cfg.get("bonds") is not None:
+        names.append("bonds")
+    return names
 
 
 def config_inputs(cfg):
@@ -281,22 +277,8 @@ def config_inputs(cfg):
 
 
 def declared_effects(cfg, dimension):
-    p = cfg.physics
-    eff = []
-    if p.gravity is not None:
-        eff.append("gravity")
-    for key in ("friction", "rolling_resistance", "energy", "contact_damping"):
-        if p[key]:
-            eff.append(key)
-    if p.local_damping is not None:
-        eff.append("local_damping")
-    if p.viscous_damping is not None:
-        eff.append("viscous_damping")
-    if p.adaptive_damping is not None:
-        eff.append("adaptive_damping")
-    if dimension == 2:
-        eff.append("planar")
-    return eff
+    """Names of the effects the stage's physics section and the case's dimension declare (registry order)."""
+    return declared(cfg.physics, dimension)
 
 
 def contact_model(cfg):

@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from demcli import interrupts
+from demcli.effects import check_shape
 from demcli.errors import InputError, StageError
 from demcli.progress import StopForecast
 from demcli.stages.dem import (build_walls, case_materials, contact_model, declared_effects, is_polyhedral, lay_walls,
@@ -53,17 +54,11 @@ def make_system(ctx, cfg, groups, time=0.0, step=0, resume=False):
     walls = build_walls(cfg, ctx.case)
     poly = is_polyhedral(groups)
     declared = declared_effects(cfg, ctx.case.dimension)
-    for only_poly in ("adaptive_damping", "contact_damping"):
-        if not poly and only_poly in declared:
-            raise InputError(f"stage {ctx.name}: physics.{only_poly} is for polyhedral bodies only")
-    if poly and ("energy" in declared or "rolling_resistance" in declared or "planar" in declared):
-        raise InputError(f"stage {ctx.name}: polyhedral bodies support gravity, friction and damping "
-                         "(energy book-keeping, rolling resistance and 2D are for spheres)")
     bonded = cfg.get("bonds") is not None or len(groups.get("bonds", {}).get("i", ())) > 0
-    if poly and bonded:
-        raise InputError(f"stage {ctx.name}: bonds join spheres; the scene holds polyhedra")
-    plan = make_plan(declared, clumps=not poly and _is_clumped(groups), walls=len(walls) > 0, polyhedra=poly,
-                     bonds=bonded)
+    clumped = not poly and _is_clumped(groups)
+    plan = make_plan(declared, clumps=clumped, walls=len(walls) > 0, polyhedra=poly, bonds=bonded)
+    # every effect on a shape it runs on (demcli check refuses the rest already, where it knows the shape)
+    check_shape(plan.effects, "polyhedra" if poly else "clumps" if clumped else "spheres", ctx.name)
     p = cfg.physics
     dyn = Dynamics(gravity=tuple(p.gravity) if p.gravity is not None else (0.0, 0.0, 0.0),
                    local_damping=p.local_damping or 0.0, viscous_damping=p.viscous_damping or 0.0,

@@ -283,10 +283,12 @@ def test_stages_that_need_another_dimension_are_refused(tmp_path):
 
 
 def test_physics_the_scene_cannot_take_is_refused(tmp_path):
+    # (the effect registry's shape support, demcli.effects: rolling resistance is not for polyhedra)
     text = (CASES / "quickstart.yaml").read_text().replace("contact_damping: true", "contact_damping: true\n"
-                                                           "      energy: true")
+                                                           "      rolling_resistance: true")
     result, _ = _check(tmp_path, text, "q.yaml")
-    _refused(result, "stages[3].physics.energy: is for spheres; the input holds polyhedral bodies")
+    _refused(result, "stages[3].physics.rolling_resistance: is not for polyhedra: a rolling-resistance moment "
+             "corrects spheres for the shape they lack")
 
 
 def test_run_refuses_before_the_first_stage_runs(tmp_path):
