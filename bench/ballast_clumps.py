@@ -71,7 +71,7 @@ def _surface(points, lo, hi, cell):
 
 
 def _stage_cfg(case, name):
-    from demcli.config.case import load_case
+    from demcli.stages.base import load_case
 
     return next(c for c in load_case(case).stages if c.name == name)
 

@@ -16,7 +16,7 @@ Target (issue 4): 10 000 particles in under a minute on 2 cores.
 import sys
 import time
 
-from demcli.stages.ballast_library import build_library
+from demcli.stages.ballast.library import build_library
 
 CLASSES = [[0.016, 0.025], [0.025, 0.0355], [0.0355, 0.045], [0.045, 0.056], [0.056, 0.063], [0.063, 0.075]]
 

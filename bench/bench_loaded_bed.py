@@ -42,10 +42,9 @@ def loaded_system(case_path, state, threads):
     import numba
     import numpy as np
 
-    from demcli.config.case import load_case
     from demcli.config.schema import Node
     from demcli.stages import loop
-    from demcli.stages.base import load_stage_types
+    from demcli.stages.base import load_case, load_stage_types
 
     load_stage_types()
     numba.set_num_threads(threads)

@@ -23,10 +23,9 @@ def main(argv=None):
     argv = sys.argv[1:] if argv is None else argv
     case_path, state_path = argv[0], argv[1]
     n = int(argv[2]) if len(argv) > 2 else 30
-    from demcli.config.case import load_case
     from demcli.kernels.poly_step import P_SEP, SEP_DIR, SEP_NONE
     from demcli.stages import loop
-    from demcli.stages.base import load_stage_types
+    from demcli.stages.base import load_case, load_stage_types
     from demcli.state import read_state
 
     load_stage_types()

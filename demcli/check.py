@@ -32,10 +32,9 @@ def _scene_estimate(case, k):
 
 def describe_case(path, overrides=()):
     """Text of the validated case's plan."""
-    from demcli.config.case import load_case
     from demcli.engine.materials import critical_time_step, pair_table
     from demcli.stages import dem
-    from demcli.stages.base import STAGE_TYPES
+    from demcli.stages.base import STAGE_TYPES, load_case
 
     case = load_case(path, overrides)
     lines = [f"case {path}: valid; {len(case.stages)} stages, dimension {case.dimension}, seed {case.seed}",

@@ -151,8 +151,8 @@ class Runner:
     """Runs the stages of one validated case."""
 
     def __init__(self, case_path, overrides=(), out=None, quiet=False, resume=False):
-        from demcli.config.case import load_case
         from demcli.config.schema import sha256_of
+        from demcli.stages.base import load_case
 
         self.case_path = Path(case_path)
         self.case = load_case(case_path, overrides)

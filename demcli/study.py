@@ -184,7 +184,7 @@ def validate_variants(case, varies, variants, overrides=()):
     The fixed ``overrides`` are checked alone first, so their problems are named once.
     Returns the validated case of the first variant (for its name and stages).
     """
-    from demcli.config.case import load_case
+    from demcli.stages.base import load_case
 
     base = load_case(case, list(overrides))
     problems = []

@@ -305,7 +305,7 @@ def plan_sweep(path, out=None):
     in ``problem``. Raises :class:`SweepFileError` for a bad sweep file, including a metric
     whose stage no valid run's case has.
     """
-    from demcli.config.case import load_case  # the stage registry: imported when needed
+    from demcli.stages.base import load_case  # the stage registry: imported when needed
 
     node, marks = load_sweep(path)
     path = Path(path)

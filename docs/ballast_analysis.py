@@ -84,8 +84,8 @@ def response(cols, device):
     """Per load cycle N >= 1: (N, swing [m], phase of the lowest point [cycle], kinetic energy at
     F_min [J], lowest coordination [-], height at F_min [m], cycle-mean height [m]), from the dem
     record columns (cycle, kinetic, coordination, and the device's height ``device``); the fit is
-    the stage's own (:func:`demcli.stages.ballast_box.cycle_response`)."""
-    from demcli.stages.ballast_box import cycle_response
+    the stage's own (:func:`demcli.stages.ballast.box.cycle_response`)."""
+    from demcli.stages.ballast.box import cycle_response
 
     cycle, z = cols["cycle"], cols[device]
     r = cycle_response(cycle, z)

@@ -1,13 +1,14 @@
 """The case file schema: top-level keys, materials, and the list of stages.
 
-Stage sections come from the stage registry (:mod:`demcli.stages.base`); this module
-adds the keys every case has and the rules across them, so that a case that ``check``
-passes does not fail later for a reason known before it runs:
+Stage sections come from the stage registry, which the stages pass in as a
+:class:`StageCatalog` (:func:`demcli.stages.base.stage_catalog`; config does not import the
+stages). This module adds the keys every case has and the rules across them, so that a case
+that ``check`` passes does not fail later for a reason known before it runs:
 
 * references (checked on the raw case, so they are reported together with every other
   problem): each ``material``, ``*_material`` and ``materials`` list names a material of
   the case; each stage's input holds what its type ``requires``, written by an earlier
-  stage (see :func:`demcli.stages.base.input_scenes`), and the first stage needs no input;
+  stage (``StageCatalog.input_scenes``), and the first stage needs no input;
 * on the valid part of the case, in the same pass (its top-level keys and its stages up to
   the first invalid one, each validated on its own): what a stage's config reads besides
   (``config_requires``), and each stage type's ``case_check`` (dimension, the classes of the
@@ -15,7 +16,8 @@ passes does not fail later for a reason known before it runs:
 """
 
 from collections.abc import Mapping
-from functools import lru_cache
+from dataclasses import dataclass
+from functools import lru_cache, partial
 
 from demcli.config.load import load_case as _load_case
 from demcli.config.schema import (NOVALUE, Float, Int, List, Map, Node, Section, Str, Tagged, did_you_mean,
@@ -71,36 +73,54 @@ def _material_refs(stages, names, report):
     walk(stages, ("stages",))
 
 
-def _stage_inputs(stages, report):
-    """Each raw stage's input must hold what its type requires: the first stage takes none."""
-    from demcli.stages.base import STAGE_TYPES, has_field, input_scenes, type_of
+@dataclass(frozen=True, eq=False)
+class StageCatalog:
+    """What the case schema needs of the stage registry. The stages build it
+    (:func:`demcli.stages.base.stage_catalog`) and pass it in, so that config does not import them.
 
-    for k, (cfg, scene) in enumerate(zip(stages, input_scenes(stages))):
-        st = type_of(cfg)
+    Attributes:
+        types: stage type name -> StageType (its ``fields``, ``doc``, ``check``, ``needs_input``,
+            ``requires``, ``config_requires`` and ``case_check`` are read here).
+        input_scenes: ``input_scenes(stages) -> [frozenset | None]``: the state fields the input
+            of each stage holds (validated Nodes or raw mappings).
+        has_field: ``has_field(scene, path)``: whether a scene holds field ``path``.
+        type_of: ``type_of(cfg)``: the StageType of a raw stage config, None when unknown.
+        writers_of: ``writers_of(path)``: names of the stage types that write field ``path``.
+    """
+
+    types: Mapping
+    input_scenes: object
+    has_field: object
+    type_of: object
+    writers_of: object
+
+
+def _stage_inputs(stages, report, catalog):
+    """Each raw stage's input must hold what its type requires: the first stage takes none."""
+    for k, (cfg, scene) in enumerate(zip(stages, catalog.input_scenes(stages))):
+        st = catalog.type_of(cfg)
         if st is None or not st.needs_input:
             continue
         if k == 0:
-            starts = ", ".join(n for n, t in sorted(STAGE_TYPES.items()) if not t.needs_input)
+            starts = ", ".join(n for n, t in sorted(catalog.types.items()) if not t.needs_input)
             report(("stages", 0, "type"), f"stage type {st.name} reads the state of an earlier stage, but this is "
                    "the first stage", hint=f"start with a stage that makes a scene ({starts})")
             continue
-        missing = [p for p in st.requires if scene is not None and not has_field(scene, p)]
+        missing = [p for p in st.requires if scene is not None and not catalog.has_field(scene, p)]
         if missing:
             before = stages[k - 1]
             report(("stages", k, "type"), f"stage type {st.name} needs {', '.join(missing)} in its input, which no "
                    f"earlier stage writes (the input is the output of stage {before.get('name')!r}, type "
                    f"{before.get('type')})",
-                   hint=_writers_hint(missing))
+                   hint=_writers_hint(missing, catalog))
 
 
-def _writers_hint(missing):
+def _writers_hint(missing, catalog):
     """Which stage types write the fields ``missing``."""
-    from demcli.stages.base import writers_of
-
-    return "stage types that write it: " + ", ".join(sorted({w for p in missing for w in writers_of(p)}))
+    return "stage types that write it: " + ", ".join(sorted({w for p in missing for w in catalog.writers_of(p)}))
 
 
-def _cross_refs(case, report):
+def _cross_refs(case, report, catalog):
     """Checks of the raw case that run whatever the validity of its fields (one pass)."""
     stages = case.get("stages")
     if not isinstance(stages, list):
@@ -108,17 +128,17 @@ def _cross_refs(case, report):
     materials = case.get("materials")
     names = list(materials) if isinstance(materials, Mapping) else []
     _material_refs(stages, names, report)
-    _stage_inputs(stages, report)
-    valid = _valid_part(case, stages)
+    _stage_inputs(stages, report, catalog)
+    valid = _valid_part(case, stages, catalog)
     if valid is not None:
-        _case_rules(valid, report)
+        _case_rules(valid, report, catalog)
 
 
-def _valid_part(case, stages):
+def _valid_part(case, stages, catalog):
     """The case with its top-level keys and its stages up to the first invalid one, each
     validated on its own (so that the case rules of those stages come in the same pass as the
     other problems), or None when a top-level key is invalid."""
-    schema = case_schema()
+    schema = case_schema(catalog)
     top = {}
     for key, field in schema.fields.items():
         if key != "stages":
@@ -140,31 +160,28 @@ def _stage_reporter(report, k):
     return stage_report
 
 
-def _case_rules(case, report):
+def _case_rules(case, report, catalog):
     """Rules of the valid part of a case (:func:`_valid_part`): inputs a stage's config reads,
     and each type's case check."""
-    from demcli.stages.base import STAGE_TYPES, has_field, input_scenes
-
-    for k, (cfg, scene) in enumerate(zip(case.stages, input_scenes(case.stages))):
-        st = STAGE_TYPES[cfg.type]
+    for k, (cfg, scene) in enumerate(zip(case.stages, catalog.input_scenes(case.stages))):
+        st = catalog.types[cfg.type]
         sub = _stage_reporter(report, k)
         reads = st.config_requires(cfg) if st.config_requires is not None and scene is not None else {}
         for key, paths in reads.items():
-            missing = [p for p in paths if not has_field(scene, p)]
+            missing = [p for p in paths if not catalog.has_field(scene, p)]
             if missing:
                 sub(key, f"reads {', '.join(missing)} from the input, which no earlier stage writes",
-                    hint=_writers_hint(missing))
+                    hint=_writers_hint(missing, catalog))
         if st.case_check is not None:
             st.case_check(cfg, case, k, scene, sub)
 
 
-@lru_cache(maxsize=1)
-def case_schema():
-    """The full case schema (built once from the registered stage types)."""
-    from demcli.stages.base import load_stage_types
-
+@lru_cache(maxsize=4)
+def case_schema(catalog):
+    """The full case schema of the stage types of ``catalog`` (a :class:`StageCatalog`; built once
+    per catalog)."""
     variants = {}
-    for name, st in sorted(load_stage_types().items()):  # by name: independent of import order
+    for name, st in sorted(catalog.types.items()):  # by name: independent of import order
         fields = {"name": Str(pattern=NAME, doc="stage name (unique; names the output files)")}
         fields.update(st.fields)
         variants[name] = Section(fields, doc=st.doc, check=st.check)
@@ -176,9 +193,10 @@ def case_schema():
                            doc="2D only: out-of-plane thickness for disk masses"),
         "materials": Map(MATERIAL, key_pattern=NAME, default={}, doc="materials by name"),
         "stages": List(Tagged("type", variants), min_len=1, unique_by="name", doc="stages, run in order"),
-    }, check_raw=_cross_refs)
+    }, check_raw=partial(_cross_refs, catalog=catalog))
 
 
-def load_case(path, overrides=()):
-    """Validated case (a read-only Node, SI values) or ConfigError listing every problem."""
-    return _load_case(path, case_schema(), overrides)
+def load_case(path, catalog, overrides=()):
+    """Validated case (a read-only Node, SI values) or ConfigError listing every problem, with the
+    stage types of ``catalog`` (:func:`demcli.stages.base.load_case` passes the built-in ones)."""
+    return _load_case(path, case_schema(catalog), overrides)

@@ -1,7 +1,8 @@
 """Stage types: each is a config schema plus a run function, registered by name.
 
 A stage type module calls :func:`register_stage` at import; the case schema is built
-from the registry, so a new stage is one new module and nothing else changes.
+from the registry (:func:`stage_catalog` hands it to :mod:`demcli.config.case`, which does not
+import the stages), so a new stage is one new module, listed in :func:`load_stage_types`.
 
 Each type declares the state fields it reads (``requires``) and writes (``provides``,
 plus the input groups it ``keeps``), so that case validation can follow the stages in
@@ -77,15 +78,64 @@ def register_stage(stage_type):
 
 def load_stage_types():
     """Import every built-in stage module (registers them) and return the registry."""
-    from demcli.stages import dem, generate, gradation  # noqa: F401
-    from demcli.stages import assemble, ballast_box, ballast_library  # noqa: F401
-    from demcli.stages import ballast_clumps  # noqa: F401  (polyhedra as sphere clumps)
-    from demcli.stages import discretize, polygons  # noqa: F401  (2D sections, seed 001)
-    from demcli.stages import asphalt_carve, asphalt_compact, asphalt_place  # noqa: F401  (3D asphalt, seed 000)
-    from demcli.stages import asphalt_cut, asphalt_mastic  # noqa: F401  (3D asphalt, seed 000)
-    from demcli.stages import sand_asphalt  # noqa: F401  (bonded viscoelastic specimens, seed 003)
+    from demcli.stages import dem
+    from demcli.stages.asphalt import carve, compact, cut, mastic, place  # 3D asphalt, seed 000
+    from demcli.stages.asphalt import discretize, polygons  # 2D sections, seed 001
+    from demcli.stages.asphalt import sand  # bonded viscoelastic specimens, seed 003
+    from demcli.stages.ballast import assemble, box, clumps, library  # railway ballast, seed 002
+    from demcli.stages.specimen import generate, gradation
 
+    del dem, carve, compact, cut, mastic, place, discretize, polygons, sand  # imported for their registrations
+    del assemble, box, clumps, library, generate, gradation
     return STAGE_TYPES
+
+
+def register_all_fields():
+    """Import every module above the state layer that declares state fields or record columns:
+    the built-in stage types (:func:`load_stage_types`) and the engine parts their states hold
+    (bonds). :func:`demcli.state.fields.register_all` calls it before it names a group unknown."""
+    from demcli.engine import bonds  # the bonds and bond_models groups
+
+    del bonds  # imported for its registrations
+    load_stage_types()
+
+
+_CATALOG = None
+
+
+def stage_catalog():
+    """The built-in stage types (all imported) as the case schema reads them
+    (:class:`demcli.config.case.StageCatalog`); the same object on every call."""
+    global _CATALOG
+    if _CATALOG is None:
+        from demcli.config.case import StageCatalog
+
+        _CATALOG = StageCatalog(types=load_stage_types(), input_scenes=input_scenes, has_field=has_field,
+                                type_of=type_of, writers_of=writers_of)
+    return _CATALOG
+
+
+def case_schema():
+    """The case schema of the built-in stage types (:func:`demcli.config.case.case_schema`)."""
+    from demcli.config.case import case_schema as schema_of
+
+    return schema_of(stage_catalog())
+
+
+def load_case(path, overrides=()):
+    """Validated case (a read-only Node, SI values) or ConfigError listing every problem: a case
+    file of the built-in stage types (:func:`demcli.config.case.load_case`)."""
+    from demcli.config.case import load_case as load_with
+
+    return load_with(path, stage_catalog(), overrides)
+
+
+def write_cases_doc(path="docs/cases.md"):
+    """Regenerate the case-file reference docs/cases.md from the built-in stage types. Run in the
+    repository root: ``python -c "from demcli.stages.base import write_cases_doc; write_cases_doc()"``."""
+    from demcli.config.docs import write
+
+    write(case_schema(), path)
 
 
 def _group(path):

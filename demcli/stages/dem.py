@@ -177,7 +177,9 @@ FIELDS = {
 }
 
 
-def _check(node, report):
+def check_stage(node, report):
+    """The rules of a ``dem`` stage's config, which every stage built on its keys shares: exactly
+    one of ``time.duration`` and ``time.steps``, and :func:`check_dynamics`."""
     t = node.time
     if (t.duration is None) == (t.steps is None):
         report("time", "give exactly one of duration or steps", None)
@@ -312,10 +314,10 @@ def case_materials(case, stiffness=1.0):
 
 def phase_materials(ctx, groups):
     """{phase name: material name} of a state with a phase table (each phase one material)."""
-    from demcli.stages.asphalt_mastic import _str_list
+    from demcli.stages.asphalt.mastic import str_list
 
     g = groups["phases"]
-    names = _str_list(g["names"])
+    names = str_list(g["names"])
     mats = list(ctx.case.materials)
     sph = np.asarray(g["sphere"], np.int64)
     smat = np.asarray(groups["spheres"]["material"], np.int64)
@@ -332,12 +334,12 @@ def phase_materials(ctx, groups):
 
 def phase_models(ctx, state_groups):
     """(bond model pairs and rows, contact-law pair overrides) from a state's phase table
-    (:func:`demcli.stages.asphalt_mastic.phase_table`): every phase pair gets linear springs
+    (:func:`demcli.stages.asphalt.mastic.phase_table`): every phase pair gets linear springs
     k_n, k_t = k_s and its friction (the law of unbonded and broken contacts); contact_bond
     and parallel_bond pairs also a bond model with their strengths."""
     from demcli.engine.bonds import model_row
     from demcli.state import State
-    from demcli.stages.asphalt_mastic import phase_table
+    from demcli.stages.asphalt.mastic import phase_table
 
     st = State()
     st.groups.update(state_groups)
@@ -522,7 +524,7 @@ def plan_summary(ctx_case, cfg, scene):
 
 
 register_stage(StageType(
-    "dem", FIELDS, run, needs_input=True, requires=("bodies/x", "spheres/radius"), check=_check,
+    "dem", FIELDS, run, needs_input=True, requires=("bodies/x", "spheres/radius"), check=check_stage,
     orders_particles=True, provides=ENGINE_OUTPUT, keeps=ENGINE_KEEPS, config_requires=config_inputs,
     case_check=scene_check,
     plan=plan_summary, doc="integrate the motion with the declared physics"))

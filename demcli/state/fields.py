@@ -768,15 +768,15 @@ DOC_END = "<!-- schema:end -->"
 
 
 def register_all() -> None:
-    """Import every module of demcli.effects, demcli.engine, demcli.state and demcli.stages,
-    so that all their field registrations are in the registry."""
-    import importlib
-    import pkgutil
+    """Register every field (and record column) demcli declares: the state layer's own modules
+    and, through :func:`demcli.stages.base.register_all_fields`, the stage types and the engine
+    parts they write. Plain imports inside the call: the stages import the state layer at import
+    time, never the other way round."""
+    from demcli.stages.base import register_all_fields
+    from demcli.state import polyhedra, records  # the polyhedra groups; the record columns
 
-    for pkg_name in ("demcli.effects", "demcli.engine", "demcli.state", "demcli.stages"):
-        pkg = importlib.import_module(pkg_name)
-        for info in pkgutil.walk_packages(pkg.__path__, pkg_name + "."):
-            importlib.import_module(info.name)
+    del polyhedra, records  # imported for their registrations
+    register_all_fields()
 
 
 def write_schema_doc(path="docs/state.md") -> None:

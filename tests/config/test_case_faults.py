@@ -314,8 +314,7 @@ def test_every_required_field_is_written_by_some_stage_type():
 
 
 def test_scenes_follow_what_stages_write_and_keep():
-    from demcli.config.case import load_case
-    from demcli.stages.base import has_field, input_scenes
+    from demcli.stages.base import has_field, input_scenes, load_case
 
     case = load_case(CASES / "quickstart.yaml")
     scenes = input_scenes(case.stages)

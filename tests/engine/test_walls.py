@@ -105,8 +105,8 @@ def test_force_wall_weight_phase_and_start_come_from_the_case():
     # Given the plate of the clump smoke case: 3.25 +- 3.25 kN from -90 deg after 2 ms, 10.5 kg, weight on
     from pathlib import Path
 
-    from demcli.config.case import load_case
     from demcli.stages import dem
+    from demcli.stages.base import load_case
 
     case = load_case(Path(__file__).resolve().parents[2] / "cases" / "smoke" / "ballast_clumps.yaml")
     cfg = next(c for c in case.stages if c.name == "plate")

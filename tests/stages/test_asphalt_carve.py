@@ -51,7 +51,7 @@ def test_planes_are_random_with_the_least_angle():
 
 
 def test_carved_aggregates_lie_inside_their_planes_through_the_whole_pipeline(smoke_run):
-    from demcli.stages.asphalt_common import plane_violations
+    from demcli.stages.asphalt.common import plane_violations
 
     carve = read_state(smoke_run / "02-carve.h5")
     a = 2 * float(carve["aggregates/ball_radius"])
@@ -275,7 +275,7 @@ def test_flat_elongated_share_of_the_kept_aggregates_matches_the_control(tmp_pat
 def test_without_new_cuts_dropping_failed_seeds_thins_out_the_flat_elongated_share(tmp_path, monkeypatch):
     # Given the same carving, but every seed cut once (the stage before the fix): a seed whose
     # polyhedron catches no ball or sieves as fines is simply dropped
-    from demcli.stages import asphalt_carve
+    from demcli.stages.asphalt import carve as asphalt_carve
 
     monkeypatch.setattr(asphalt_carve, "REDRAW_MAX", 0)
     st = _carve_many(tmp_path, 0.3, "once")

@@ -85,7 +85,7 @@ def test_compaction_stops_at_a_target_porosity(tmp_path):
 
 
 def test_compact_needs_one_closed_box_and_the_aggregates_inside(tmp_path):
-    from demcli.config.case import load_case
+    from demcli.stages.base import load_case
 
     def open_box(stages):
         stages[3]["walls"][0]["open"] = ["z1"]

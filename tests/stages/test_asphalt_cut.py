@@ -39,7 +39,7 @@ def _radial(st):
 
 def test_trimmed_specimen_lies_inside_the_cylinder(smoke_run):
     from demcli.geometry.carving import element_volume
-    from demcli.stages.asphalt_common import plane_violations
+    from demcli.stages.asphalt.common import plane_violations
 
     st = read_state(smoke_run / "04-cut.h5")
     before = read_state(smoke_run / "03-compact.h5")

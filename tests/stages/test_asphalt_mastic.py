@@ -34,8 +34,8 @@ def _remastic(smoke_run, tmp_path, overrides):
 
 
 def test_air_voids_within_one_ball_of_the_target(smoke_run):
-    from demcli.stages.asphalt_common import inside_member_cells
-    from demcli.stages.asphalt_cut import inside
+    from demcli.stages.asphalt.common import inside_member_cells
+    from demcli.stages.asphalt.cut import inside
 
     st = read_state(smoke_run / "05-mastic.h5")
     m = st.groups["mastic"]
@@ -79,7 +79,7 @@ def test_too_much_mastic_for_the_voids_is_a_clear_error(smoke_run, tmp_path):
 
 
 def test_phase_pair_table_is_complete_and_validated(smoke_run):
-    from demcli.stages.asphalt_mastic import phase_problems, phase_table
+    from demcli.stages.asphalt.mastic import phase_problems, phase_table
 
     st = read_state(smoke_run / "05-mastic.h5")
     table = phase_table(st)
@@ -115,7 +115,7 @@ def _mastic_config_case(tmp_path, edit):
 
 
 def test_a_missing_pair_or_strength_is_a_config_error(tmp_path):
-    from demcli.config.case import load_case
+    from demcli.stages.base import load_case
 
     def drop_pair(stage):
         stage["contacts"] = stage["contacts"][:2]
@@ -162,7 +162,7 @@ def test_cell_lattice_volume_is_unbiased_when_the_size_is_whole_cells(shape):
     perimeter, measured 0.6 % at these sizes), so its volume is held to 1.5 %."""
     import math
 
-    from demcli.stages.asphalt_mastic import cell_centres
+    from demcli.stages.asphalt.mastic import cell_centres
 
     size = np.array([20e-3, 20e-3, 12e-3])
     centre = np.array([0.011, 0.013, 0.007])

@@ -11,7 +11,7 @@ import pytest
 from demcli import run_case
 from demcli.geometry import convex_hull
 from demcli.geometry.intersect import intersect, separation
-from demcli.stages.ballast_library import read_library
+from demcli.stages.ballast.library import read_library
 from demcli.state import read_state
 from demcli.state.polyhedra import ShapeTable, body_convex, rotation_matrices, world_vertices
 

@@ -90,7 +90,7 @@ def test_vibrate_records_density_per_cycle_under_the_plate(chain):
 
 
 def _check_response(rows, dem_rows, device):
-    from demcli.stages.ballast_box import cycle_response
+    from demcli.stages.ballast.box import cycle_response
 
     assert np.isnan(rows["swing"][0]) and np.isnan(rows["lag"][0])
     ref = cycle_response(dem_rows["cycle"], dem_rows[device])
@@ -100,7 +100,7 @@ def _check_response(rows, dem_rows, device):
 
 
 def test_cycle_response_of_known_motions():
-    from demcli.stages.ballast_box import cycle_response
+    from demcli.stages.ballast.box import cycle_response
 
     # Given a device sampled 4 and 8 times per cycle, moving as m + A cos(2 pi (phase - p_low)) +
     # a drift, lowest at p_low = 0.5 (with the peak load), 0.75 and 0.3, and a cycle with too few samples
@@ -145,7 +145,7 @@ def test_sleeper_fills_the_shoulders_and_records_settlement(chain):
 
 
 def test_cyclic_stages_sample_each_load_cycle_at_least_20_times(chain):
-    from demcli.stages.ballast_box import SLEEPER, VIBRATE
+    from demcli.stages.ballast.box import SLEEPER, VIBRATE
 
     # Given the default of the vibrate and sleeper stages (the smoke case sets none)
     assert VIBRATE["records_per_cycle"].default >= 20 and SLEEPER["records_per_cycle"].default >= 20
@@ -187,7 +187,7 @@ def test_ballast_figures_print_the_papers_axes(chain):
 
 def test_cycle_timing_gives_whole_cycles_of_whole_records():
     from demcli.config.schema import Node
-    from demcli.stages.ballast_box import cycle_timing
+    from demcli.stages.ballast.box import cycle_timing
 
     load = Node({"frequency": 10.0, "settle": 0.013, "min": 0.0, "max": 1.0})
     dt, total, rec = cycle_timing(load, cycles=7, records_per_cycle=4, dt=3.3e-5)
@@ -205,7 +205,7 @@ def test_cycle_timing_gives_whole_cycles_of_whole_records():
 
 def test_bed_measures_and_surface_height_of_a_known_layer():
     from demcli.engine.poly_system import polyhedra_groups
-    from demcli.stages.ballast_box import bed_measures, surface_height
+    from demcli.stages.ballast.box import bed_measures, surface_height
     from test_polyhedra_dynamics import box
 
     # Given: a 3 x 2 layer of 5 cm cubes on the floor of a 15 x 10 cm box
@@ -244,8 +244,8 @@ def test_mass_scaling_keeps_weights_and_gives_back_real_masses():
 
 def test_stiffness_scaling_changes_only_the_moduli():
     # Given: the smoke deposit planned with scaling.stiffness 0.01
-    from demcli.config.case import load_case
     from demcli.stages import dem
+    from demcli.stages.base import load_case
 
     case = load_case(SMOKE, ["stages.3.scaling.stiffness=0.01"])
     cfg = case.stages[3]

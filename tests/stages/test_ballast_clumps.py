@@ -10,7 +10,7 @@ import pytest
 from demcli import run_case
 from demcli.engine.poly_system import polyhedra_groups
 from demcli.geometry import convex_hull
-from demcli.stages.ballast_clumps import clump_groups
+from demcli.stages.ballast.clumps import clump_groups
 from demcli.state import State, read_state
 from demcli.state.polyhedra import rotation_matrices
 from demcli.state.order import sphere_rows_by_id

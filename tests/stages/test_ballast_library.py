@@ -8,7 +8,7 @@ import pytest
 from demcli import run_case
 from demcli.errors import ConfigError, StageError
 from demcli.geometry import convex_hull, sieve_size
-from demcli.stages.ballast_library import build_library, read_library, write_library
+from demcli.stages.ballast.library import build_library, read_library, write_library
 from demcli.state import read_state
 
 CASES = Path(__file__).resolve().parents[2] / "cases"

@@ -14,7 +14,7 @@ from click.testing import CliRunner
 from demcli import run_case
 from demcli.cli import cli
 from demcli.geometry.section2d import Specimen, hex_lattice
-from demcli.stages.discretize import group_disk_properties
+from demcli.stages.asphalt.discretize import group_disk_properties
 from demcli.state import read_state
 
 CASES = Path(__file__).resolve().parents[2] / "cases"

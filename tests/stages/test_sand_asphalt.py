@@ -12,7 +12,7 @@ from demcli import run_case
 from demcli.cli import cli
 from demcli.compare import read_record
 from demcli.kernels.bonds import BURGERS, INTACT
-from demcli.stages.sand_asphalt import confining_stress, dilation_gradient, strains
+from demcli.stages.asphalt.sand import confining_stress, dilation_gradient, strains
 from demcli.state import read_state
 
 ROOT = Path(__file__).resolve().parents[2]

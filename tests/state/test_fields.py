@@ -88,8 +88,9 @@ def test_group_of_a_stage_not_imported_is_known(tmp_path):
 
     case = Path(__file__).resolve().parents[2] / "cases" / "smoke" / "ballast_deposit.yaml"
     run_case(case, out=tmp_path, only="grading", quiet=True)
-    code = ("import sys; from demcli.state import read_state; before = 'demcli.stages.gradation' in sys.modules; "
-            "st = read_state(sys.argv[1]); print(before, sorted(st.groups))")
+    code = ("import sys; from demcli.state import read_state; "
+            "before = 'demcli.stages.specimen.gradation' in sys.modules; st = read_state(sys.argv[1]); "
+            "print(before, sorted(st.groups))")
     out = subprocess.run([sys.executable, "-c", code, str(tmp_path / "00-grading.h5")], capture_output=True,
                          text=True)
     # Then it reads and validates: the registry imports the stage that registers the group

@@ -78,8 +78,8 @@ def _case_check(cfg, case, k, scene, report):
     """Memory for the balls: the solids of the gradation before, over a ball's lattice cell (of
     ``relative`` x the class's lower size where the diameter follows the particles)."""
     from demcli.config.memory import check_memory
-    from demcli.stages.ballast_library import library_classes
-    from demcli.stages.gradation import compute
+    from demcli.stages.ballast.library import library_classes
+    from demcli.stages.specimen.gradation import compute
 
     grading = earlier_stage(case, k, "gradation")
     if grading is None:

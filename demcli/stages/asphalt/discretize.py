@@ -70,7 +70,7 @@ def _case_check(cfg, case, k, scene, report):
     """A 2D case, and memory for the balls over the section of the polygons stage before
     (a hexagonal cell is 2 sqrt(3) r^2)."""
     from demcli.config.memory import check_memory
-    from demcli.stages.gradation import specimen_amount
+    from demcli.stages.specimen.gradation import specimen_amount
 
     require_dimension(case, 2, "a discretized section", report)
     section = earlier_stage(case, k, "polygons")

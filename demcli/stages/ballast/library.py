@@ -427,7 +427,7 @@ def _case_check(cfg, case, k, scene, report):
     """A library for an assemble stage must be able to fill every class of the gradation it
     is built for: per_class particles, each at most :func:`particle_volume_bound`."""
     from demcli.config.memory import BYTES_PER_POLYHEDRON, check_memory
-    from demcli.stages.gradation import compute
+    from demcli.stages.specimen.gradation import compute
 
     grading = earlier_stage(case, k, "gradation")
     if grading is None:

@@ -105,7 +105,7 @@ def _check_box(node, report):
 
 
 def _check_deposit(node, report):
-    dem._check(node, report)
+    dem.check_stage(node, report)
     _check_box(node, report)
     if node.stop is None:
         report("stop", "deposit needs a stop criterion (stop.kinetic_ratio)", None)
@@ -431,8 +431,8 @@ def shoulder_ballast(ctx, groups, state_in, region_lo, region_hi, solids, materi
     it) stacked by drop placement in the box ``region_lo``-``region_hi`` [m]."""
     import json
 
-    from demcli.stages.assemble import _rotated, drop_pack, pick_classes
-    from demcli.stages.ballast_library import ensure_library
+    from demcli.stages.ballast.assemble import drop_pack, pick_classes, rotated_shapes
+    from demcli.stages.ballast.library import ensure_library
     from demcli.state.polyhedra import ShapeTable, rotation_matrices
 
     if "library" not in state_in.groups or "gradation" not in state_in.groups:
@@ -449,7 +449,7 @@ def shoulder_ballast(ctx, groups, state_in, region_lo, region_hi, solids, materi
     n = len(rows)
     shapes = lib.shapes.subset(rows)
     q = _fitting_orientations(rng, shapes, region_hi[:2] - region_lo[:2] - 2.0 * clearance)
-    x, top = drop_pack(rng, _rotated(shapes, rotation_matrices(q)), region_lo, region_hi, clearance, tries=tries,
+    x, top = drop_pack(rng, rotated_shapes(shapes, rotation_matrices(q)), region_lo, region_hi, clearance, tries=tries,
                        slide=slide)
     density = ctx.case.materials[material].density
     nb = len(groups["bodies"]["mass"])
@@ -477,7 +477,7 @@ def shoulder_ballast(ctx, groups, state_in, region_lo, region_hi, solids, materi
 def _fitting_orientations(rng, shapes, floor, tries=100):
     """Uniform random orientations (n, 4), each redrawn (up to ``tries`` times) until the
     particle's (x, y) extent fits the ``floor`` (2,) [m] of a narrow shoulder."""
-    from demcli.stages.assemble import random_quaternions
+    from demcli.stages.ballast.assemble import random_quaternions
     from demcli.state.polyhedra import rotation_matrices
 
     n = len(shapes)

@@ -59,7 +59,9 @@ import numpy as np
 
 from demcli.config.schema import Float, List, Section, Str, Tagged
 from demcli.errors import InputError, StageError, StateError
-from demcli.stages import asphalt_common  # noqa: F401  (registers the seeds and aggregates groups)
+# common registers the seeds and aggregates groups
+from demcli.stages.asphalt.common import (copy_group, inside_member_cells, phase_of_spheres, scalar_str,
+                                          write_asphalt_vtu)
 from demcli.stages.base import StageType, earlier_stage, register_stage
 from demcli.state.fields import Field, register, register_group
 
@@ -180,12 +182,12 @@ def _case_check(cfg, case, k, scene, report):
     """Memory for the mastic cells over the specimen of the cut stage before, and for an
     amount by mix, a mix with aggregate."""
     from demcli.config.memory import check_memory
-    from demcli.stages.asphalt_cut import _size, volume_of
-    from demcli.stages.gradation import compute
+    from demcli.stages.asphalt.cut import specimen_size, volume_of
+    from demcli.stages.specimen.gradation import compute
 
     cut = earlier_stage(case, k, "cut")
     if cut is not None:
-        cells = volume_of(cut.shape.shape, _size(cut.shape)) / (2.0 * cfg.ball_radius) ** 3
+        cells = volume_of(cut.shape.shape, specimen_size(cut.shape)) / (2.0 * cfg.ball_radius) ** 3
         check_memory(report, "ball_radius", cells, f"the mastic cells over the specimen of stage {cut.name!r}",
                       cfg.ball_radius)
     grading = earlier_stage(case, k, "gradation")
@@ -211,7 +213,8 @@ def pair_table(contacts):
             np.array([r[2] for r in rows]).reshape(-1, len(PARAMS)))
 
 
-def _str_list(values):
+def str_list(values):
+    """A stored string array (bytes or str, any shape) as a flat list of str."""
     return [v.decode() if isinstance(v, bytes) else str(v) for v in np.asarray(values).reshape(-1)]
 
 
@@ -221,10 +224,10 @@ def phase_problems(state):
     if g is None:
         return ["no phases group (written by a mastic stage)"]
     out = []
-    names = _str_list(g["names"])
+    names = str_list(g["names"])
     pairs = np.asarray(g["pair_phases"], np.int64).reshape(-1, 2)
-    models = _str_list(g["pair_model"])
-    pnames = _str_list(g["param_names"])
+    models = str_list(g["pair_model"])
+    pnames = str_list(g["param_names"])
     prm = np.asarray(g["pair_params"], float).reshape(len(pairs), -1)
     nph = len(names)
     seen = {}
@@ -256,8 +259,6 @@ def phase_problems(state):
     if len(sph) and (sph.min() < 0 or sph.max() >= nph):
         out.append(f"phases/sphere holds values outside 0..{nph - 1}")
     if "aggregates" in state.groups and len(sph) == len(state["spheres/body"]):
-        from demcli.stages.asphalt_common import phase_of_spheres
-
         expect = np.where(phase_of_spheres(state) >= 0, names.index("aggregate") if "aggregate" in names else 0,
                           names.index("mastic") if "mastic" in names else 1)
         bad = int(np.sum(expect != sph))
@@ -277,12 +278,12 @@ def phase_table(state):
     if problems:
         raise StateError("invalid phase table: " + "; ".join(problems))
     g = state.groups["phases"]
-    names = _str_list(g["names"])
-    pnames = _str_list(g["param_names"])
+    names = str_list(g["names"])
+    pnames = str_list(g["param_names"])
     prm = np.asarray(g["pair_params"], float)
     out = {}
     for k, (a, b) in enumerate(np.asarray(g["pair_phases"], np.int64).reshape(-1, 2)):
-        model = _str_list(g["pair_model"])[k]
+        model = str_list(g["pair_model"])[k]
         out[(names[a], names[b])] = (model, {p: float(prm[k, pnames.index(p)]) for p in MODELS[model]})
     return out
 
@@ -298,7 +299,7 @@ def cell_centres(shape, centre, size, a):
     exact when it is one; no centre lies within a / 4 of an end face (module docstring,
     step 1).
     """
-    from demcli.stages.asphalt_cut import inside
+    from demcli.stages.asphalt.cut import inside
 
     centre = np.asarray(centre, float)
     size = np.asarray(size, float)
@@ -314,14 +315,11 @@ def run(ctx, cfg, state_in):
     from scipy.spatial import cKDTree
 
     from demcli.state import RecordTable
-    from demcli.stages.asphalt_common import copy_group, inside_member_cells, write_asphalt_vtu
-    from demcli.stages.asphalt_cut import inside
+    from demcli.stages.asphalt.cut import inside
 
     sp = state_in.groups.get("specimen")
     if sp is None:
         raise InputError(f"stage {ctx.name}: the input has no specimen (run a cut stage first)")
-    from demcli.stages.asphalt_common import scalar_str
-
     shape = scalar_str(sp["shape"])
     centre = np.asarray(sp["centre"], float)
     size = np.asarray(sp["size"], float)

@@ -185,8 +185,8 @@ def run(ctx, cfg, state_in):
 
     res = compute(cfg)  # its dimension is the case's (checked at validation)
     state = ctx.new_state()
-    state.groups["bodies"] = _empty_bodies()
-    state.groups["spheres"] = _empty_spheres()
+    state.groups["bodies"] = empty_bodies()
+    state.groups["spheres"] = empty_spheres()
     state.groups["gradation"] = {"sieves": np.asarray(cfg.sieves, float), "passing": np.asarray(cfg.passing, float),
                                  **{k: np.asarray(v, float) for k, v in res.items() if k != "dim"}}
     unit = "m^2" if res["dim"] == 2 else "m^3"
@@ -208,12 +208,14 @@ def run(ctx, cfg, state_in):
     return state
 
 
-def _empty_bodies():
+def empty_bodies():
+    """The arrays of an empty ``bodies`` group (a state with no particles yet)."""
     return {"x": np.zeros((0, 3)), "v": np.zeros((0, 3)), "q": np.zeros((0, 4)), "omega": np.zeros((0, 3)),
             "mass": np.zeros(0), "inertia": np.zeros((0, 3)), "id": np.zeros(0, np.int64), "flags": np.zeros(0, np.int8)}
 
 
-def _empty_spheres():
+def empty_spheres():
+    """The arrays of an empty ``spheres`` group."""
     return {"body": np.zeros(0, np.int64), "offset": np.zeros((0, 3)), "radius": np.zeros(0),
             "material": np.zeros(0, np.int64)}
 

@@ -26,7 +26,7 @@ import numpy as np
 
 from demcli.config.schema import Float, Int, Section, Str, Tagged, Vector
 from demcli.errors import InputError, StageError
-from demcli.stages import asphalt_common  # noqa: F401  (registers the seeds and aggregates groups)
+from demcli.stages.asphalt.common import copy_group  # (common registers the seeds and aggregates groups)
 from demcli.stages.base import StageType, earlier_stage, register_stage, require_dimension
 from demcli.state.records import describe_column
 
@@ -58,7 +58,7 @@ def _check(node, report):
 def _case_check(cfg, case, k, scene, report):
     """A 3D case, and room in the region for the largest class of the gradation."""
     from demcli.config.memory import check_memory
-    from demcli.stages.gradation import compute
+    from demcli.stages.specimen.gradation import compute
 
     require_dimension(case, 3, "a place_spheres specimen", report)
     if cfg.target.kind == "count":
@@ -110,7 +110,6 @@ def draw_seeds(rng, cfg, lower, upper, share):
 def run(ctx, cfg, state_in):
     from demcli.geometry.carving import place_spheres
     from demcli.state import RecordTable
-    from demcli.stages.asphalt_common import copy_group
 
     g = state_in.groups["gradation"]
     lower = np.asarray(g["class_lower"], float)
@@ -131,10 +130,10 @@ def run(ctx, cfg, state_in):
     mat = list(ctx.case.materials).index(cfg.material)
     n = len(diam)
     state = ctx.new_state()
-    from demcli.stages.gradation import _empty_bodies, _empty_spheres
+    from demcli.stages.specimen.gradation import empty_bodies, empty_spheres
 
-    state.groups["bodies"] = _empty_bodies()
-    state.groups["spheres"] = _empty_spheres()
+    state.groups["bodies"] = empty_bodies()
+    state.groups["spheres"] = empty_spheres()
     state.groups["gradation"] = copy_group(state_in, "gradation")
     state.groups["seeds"] = {"centre": pos, "radius": 0.5 * diam, "class": cls,
                              "material": np.full(n, mat, np.int64), "status": np.zeros(n, np.int8),

@@ -49,7 +49,7 @@ import numpy as np
 from demcli.config.schema import Float, Int, Optional, Section, Str
 from demcli.errors import InputError
 from demcli.stages import dem, loop
-from demcli.stages import asphalt_common  # noqa: F401  (registers the seeds and aggregates groups)
+from demcli.stages.asphalt.common import copy_group, solid_volume  # (it registers the seeds and aggregates groups)
 from demcli.stages.base import ENGINE_KEEPS, ENGINE_OUTPUT, StageType, register_stage
 from demcli.state.fields import Field, register, register_group
 from demcli.state.records import describe_column
@@ -101,7 +101,7 @@ def _box_wall(node):
 
 
 def _check(node, report):
-    dem._check(node, report)
+    dem.check_stage(node, report)
     boxes = [k for k, w in enumerate(node.walls) if w.type == "box"]
     if len(boxes) != 1:
         report("walls", f"needs exactly one box wall (got {len(boxes)}): porosity is measured inside it", None)
@@ -261,7 +261,6 @@ def _face_area(size, face):
 
 
 def run(ctx, cfg, state_in):
-    from demcli.stages.asphalt_common import copy_group, solid_volume
 
     if "aggregates" not in state_in.groups:
         raise InputError(f"stage {ctx.name}: the input has no aggregates (run a carve stage first)")

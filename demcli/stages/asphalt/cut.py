@@ -29,7 +29,9 @@ import numpy as np
 
 from demcli.config.schema import Float, Optional, Section, Str, Tagged, Vector
 from demcli.errors import InputError, StageError
-from demcli.stages import asphalt_common  # noqa: F401  (registers the seeds and aggregates groups)
+# common registers the seeds and aggregates groups
+from demcli.stages.asphalt.common import (box_of_walls, build_aggregate_bodies, copy_group, scalar_str, world_planes,
+                                          write_asphalt_vtu)
 from demcli.stages.base import StageType, register_stage
 from demcli.state.fields import Field, register, register_group
 
@@ -58,7 +60,8 @@ FIELDS = {
 }
 
 
-def _size(shape):
+def specimen_size(shape):
+    """The specimen's extent along x, y, z (a cylinder's diameter twice, then its height)."""
     if shape.shape == "cylinder":
         return np.array([shape.diameter, shape.diameter, shape.height])
     return np.array(shape.size, float)
@@ -81,8 +84,6 @@ def volume_of(shape, size):
 def run(ctx, cfg, state_in):
     from demcli.geometry.carving import element_volume, normal_widths
     from demcli.state import RecordTable
-    from demcli.stages.asphalt_common import (box_of_walls, build_aggregate_bodies, copy_group, scalar_str,
-                                              world_planes, write_asphalt_vtu)
 
     if "aggregates" not in state_in.groups:
         raise InputError(f"stage {ctx.name}: the input has no aggregates (run carve and compact first)")
@@ -93,7 +94,7 @@ def run(ctx, cfg, state_in):
         raise InputError(f"stage {ctx.name}: cut works on aggregates only (the input has {nb - n_agg} other bodies); "
                          "cut before adding mastic")
     kind = cfg.shape.shape
-    size = _size(cfg.shape)
+    size = specimen_size(cfg.shape)
     centres = state_in.sphere_centres()
     radius = np.asarray(state_in["spheres/radius"], float)
     box = box_of_walls(state_in)
@@ -213,7 +214,7 @@ def run(ctx, cfg, state_in):
 
 
 def describe(cfg, case):
-    size = " x ".join(f"{v * 1e3:g}" for v in _size(cfg.shape))
+    size = " x ".join(f"{v * 1e3:g}" for v in specimen_size(cfg.shape))
     return f"{cfg.shape.shape} {size} mm, crossing aggregates: {cfg.crossing}"
 
 

@@ -86,7 +86,7 @@ def _check(node, report):
 
 def _case_check(cfg, case, k, scene, report):
     """A 2D case, and the specimen of the gradation stage the classes come from."""
-    from demcli.stages.gradation import specimen_amount
+    from demcli.stages.specimen.gradation import specimen_amount
 
     require_dimension(case, 2, "a polygons section", report)
     grading = earlier_stage(case, k, "gradation")

@@ -66,8 +66,8 @@ def _check(node, report):
 
 def _case_check(cfg, case, k, scene, report):
     """Every class with a volume must be one a library covers (a positive lower size)."""
-    from demcli.stages.ballast_library import library_classes
-    from demcli.stages.gradation import compute
+    from demcli.stages.ballast.library import library_classes
+    from demcli.stages.specimen.gradation import compute
 
     grading = earlier_stage(case, k, "gradation")
     if grading is None:
@@ -266,7 +266,7 @@ def drop_pack(rng, bodies, box_min, box_max, clearance, tries=4, slide=0, max_ce
     """Ballistic deposition on a height map, checked with the exact separating-axis test.
 
     bodies: per body (Convex rotated to the world with its centroid at the origin, its
-    face normals, its face offsets), as made by :func:`_rotated`. In the given order
+    face normals, its face offsets), as made by :func:`rotated_shapes`. In the given order
     each body is tried at ``tries`` random (x, y) inside the box's side walls and
     dropped onto a height map of what lies below (the largest top height over each
     grid point, plus ``clearance``); the lowest try is kept and then slid downhill
@@ -348,8 +348,9 @@ def drop_pack(rng, bodies, box_min, box_max, clearance, tries=4, slide=0, max_ce
     return pos, top
 
 
-def _rotated(table, rot):
-    """Per body: (Convex rotated to the world with its centroid at the origin, face normals, offsets)."""
+def rotated_shapes(table, rot):
+    """The polyhedra of ``table`` turned by the rotation matrices ``rot``, as :func:`drop_pack` takes
+    them: per body (Convex rotated to the world with its centroid at the origin, face normals, offsets)."""
     from demcli.geometry.intersect import Convex
 
     out = []
@@ -371,7 +372,7 @@ def run(ctx, cfg, state_in):
     import json
 
     from demcli.geometry import sieve_set
-    from demcli.stages.ballast_library import ensure_library
+    from demcli.stages.ballast.library import ensure_library
     from demcli.state import RecordTable
     from demcli.state.polyhedra import rotation_matrices
 
@@ -390,7 +391,7 @@ def run(ctx, cfg, state_in):
     rot = rotation_matrices(q)
     box_min, box_max = np.array(cfg.box.min), np.array(cfg.box.max)
     if cfg.placement == "drop":
-        x, top = drop_pack(rng, _rotated(shapes, rot), box_min, box_max, cfg.clearance, tries=cfg.tries,
+        x, top = drop_pack(rng, rotated_shapes(shapes, rot), box_min, box_max, cfg.clearance, tries=cfg.tries,
                            slide=cfg.slide)
     else:
         owner = np.repeat(np.arange(n), np.diff(shapes.vertex_start))

@@ -39,7 +39,8 @@ import numpy as np
 
 from demcli.config.schema import Float, Int, Optional, Section, Str
 from demcli.errors import StageError
-from demcli.stages import asphalt_common  # noqa: F401  (registers the seeds and aggregates groups)
+# common registers the seeds and aggregates groups
+from demcli.stages.asphalt.common import build_aggregate_bodies, copy_group, write_asphalt_vtu
 from demcli.stages.base import StageType, earlier_stage, register_stage
 from demcli.state.records import describe_column
 
@@ -349,7 +350,6 @@ def _remove_round(carver, masses, target, tol):
 def run(ctx, cfg, state_in):
     from demcli.geometry.carving import make_lattice, normal_widths, members_by_label
     from demcli.state import RecordTable
-    from demcli.stages.asphalt_common import build_aggregate_bodies, copy_group, write_asphalt_vtu
     from demcli.state.order import spatial_permutation
 
     t_start = time.perf_counter()
