@@ -23,7 +23,7 @@ def main(argv=None):
     argv = sys.argv[1:] if argv is None else argv
     case_path, state_path = argv[0], argv[1]
     n = int(argv[2]) if len(argv) > 2 else 30
-    from demcli.kernels.poly_step import P_SEP, SEP_DIR, SEP_NONE
+    from demcli.kernels.shapes.polyhedra import SEP_DIR, SEP_NONE
     from demcli.stages import loop
     from demcli.stages.base import load_case, load_stage_types
     from demcli.state import read_state
@@ -49,11 +49,11 @@ def main(argv=None):
         ta += time.perf_counter() - t
         t = time.perf_counter()
         for _ in range(n):
-            b.nl[P_SEP][:] = SEP_NONE
+            b.nl.sep[:] = SEP_NONE
             b.advance(1)
         tb += time.perf_counter() - t
     nb = len(a.mass)
-    sep = a.nl[P_SEP]
+    sep = a.nl.sep
     print(f"{nb} bodies, {len(sep)} listed pairs: cached {nb * 3 * n / ta:.3g} body-steps/s, "
           f"uncached {nb * 3 * n / tb:.3g}, speed-up {tb / ta:.2f}; bit-identical: {np.array_equal(a.x, b.x)}")
     faces = np.count_nonzero((sep != 0) & (sep != SEP_NONE) & (sep != SEP_DIR))

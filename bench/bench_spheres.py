@@ -35,7 +35,7 @@ sys.path.insert(0, HERE)
 import demcli  # noqa: E402  (first: it sets OPENBLAS_NUM_THREADS before numpy loads OpenBLAS)
 import numpy as np  # noqa: E402
 from demcli.jit import set_threads  # noqa: E402
-from demcli.kernels.layout import C_REBUILD, STATUS_TEXT  # noqa: E402
+from demcli.kernels.layout import C_REBUILD, STATUS_TEXT# noqa: E402
 from scene_drop import D, SPACING, lattice_dims, make_system  # noqa: E402
 
 

@@ -1,4 +1,4 @@
-"""The peers' "poly" scene (../shared/peers/yade/poly.py) as a :class:`PolySystem`.
+"""The peers' "poly" scene (../shared/peers/yade/poly.py) as a polyhedral :class:`demcli.engine.system.System`.
 
 500 random convex polyhedra fall in a closed box: each shape is YADE's
 ``Polyhedra::GenerateRandomGeometry`` redone in numpy (the Voronoi cell of a centre
@@ -109,7 +109,7 @@ def random_yade_polyhedron(size, seed):
 
 def build(n=500, seed=2024, young=YOUNG):
     """(groups, walls, materials, box (L, L, H)) of the scene."""
-    from demcli.engine.poly_system import polyhedra_groups
+    from demcli.engine.poly_shape import polyhedra_groups
     from demcli.engine.system import Walls
     from demcli.engine.materials import Material
 
@@ -129,15 +129,15 @@ def build(n=500, seed=2024, young=YOUNG):
 
 
 def make_system(n=500, seed=2024, skin=0.3, dt=DT, check_every=100, young=YOUNG):
-    """The scene as a PolySystem (gravity, friction, local damping 0.3, six plane walls)."""
+    """The scene as a System (gravity, friction, local damping 0.3, six plane walls)."""
     from demcli.engine.materials import ContactModel
     from demcli.engine.plan import make_plan
-    from demcli.engine.poly_system import PolySystem
+    from demcli.engine.system import System
     from demcli.engine.system import Dynamics
 
     groups, walls, mats, box, rcirc = build(n, seed, young)
     plan = make_plan(["gravity", "friction", "local_damping"], walls=True)
-    s = PolySystem(groups, mats, ContactModel(), plan, walls,
+    s = System(groups, mats, ContactModel(), plan, walls,
                    Dynamics(gravity=(0.0, 0.0, -9.81), local_damping=LOCAL_DAMPING, skin=skin,
                             check_every=check_every), dt=dt)
     s.box = box

@@ -70,7 +70,7 @@ def test_check_compiles_no_kernel():
         "import sys, numba\n"
         "from demcli.check import describe_case\n"
         "describe_case(sys.argv[1])\n"
-        "import demcli.kernels.step as a, demcli.kernels.neighbors as b, demcli.kernels.contact as c\n"
+        "import demcli.kernels.engine as a, demcli.kernels.neighbors as b, demcli.kernels.motion as c\n"
         "d = [f for m in (a, b, c) for f in vars(m).values() if isinstance(f, numba.core.dispatcher.Dispatcher)]\n"
         "assert d, 'no kernels found'\n"
         "print(sum(len(f.signatures) for f in d))\n")

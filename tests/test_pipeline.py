@@ -265,9 +265,9 @@ def test_undeclared_effects_allocate_nothing_and_run_no_pass(tmp_path):
     s.advance(50)
     nl = s.nl
     # Then friction, rolling and energy arrays have no rows although contacts exist
-    assert nl[K.NL_ACT].sum() > 0
-    assert nl[K.NL_FT].shape[0] == 0 and nl[K.NL_MR].shape[0] == 0 and nl[K.NL_EPAIR].shape[0] == 0
-    assert nl[K.NL_TJ].shape[0] == 0  # no torque rows
+    assert nl.act.sum() > 0
+    assert nl.ft.shape[0] == 0 and nl.mr.shape[0] == 0 and nl.epair.shape[0] == 0
+    assert nl.tj.shape[0] == 0  # no torque rows
     assert s.esph.shape[0] == 0 and s.ebody.shape[0] == 0 and len(s.L) == 0
     # and the kernel never entered their passes, while the declared ones ran every step
     c = dict(zip(K.COUNTERS, s.counters))

@@ -4,7 +4,7 @@ An actor is an ordinary polyhedral body of the scene (exact polyhedron-polyhedro
 contact with every particle) with three differences:
 
 - it is one of the last bodies, outside the cell grid, paired by bounding sphere
-  with every particle (:func:`demcli.kernels.poly_step.add_actor_pairs`): a grid cell
+  with every particle (:func:`demcli.kernels.neighbors.add_actor_pairs`): a grid cell
   sized for a 0.6 m plate would hold the whole bed;
 - it moves along z only: rotation and the x, y velocity are held (flags
   FIX_ROTATION | FIX_X | FIX_Y), as the plate and the sleeper of a ballast box test
@@ -21,7 +21,7 @@ import math
 
 import numpy as np
 
-from demcli.engine.poly_system import polyhedra_groups
+from demcli.engine.poly_shape import polyhedra_groups
 from demcli.geometry import convex_hull
 from demcli.kernels import layout as K
 from demcli.state.polyhedra import ShapeTable

@@ -1,8 +1,12 @@
-"""A scene in memory: structure-of-arrays state, plan, and the compiled step loop.
+"""A scene in memory: structure-of-arrays state, plan, and the one compiled step loop.
 
 :class:`System` is built from a state's groups (see docs/state.md), a stage's contact
-model, effects and walls. It owns every array the kernels touch and allocates only
-what the plan asks for (inactive effects get size-0 placeholders).
+model, effects and walls, for any body shape: the shape plug-in (``SphereShape`` for
+spheres and clumps in :mod:`demcli.engine.sphere_shape`, ``PolyShape`` for convex
+polyhedra in :mod:`demcli.engine.poly_shape`) sets up what differs (primitives, contact
+tables, critical step, contact state groups); everything else is shared and runs
+:func:`demcli.kernels.engine.run_steps`. It owns every array the kernels touch and allocates
+only what the plan asks for (inactive effects get size-0 placeholders).
 """
 
 import math
@@ -10,15 +14,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from demcli.engine.materials import LAWS, critical_time_step, pair_table
 from demcli.kernels import layout as K
+from demcli.kernels import motion as M
 from demcli.kernels.walls import N_WPARAMS
 
-_EMPTY_I = np.empty(0, np.int64)
-
-
-def _empty2(cols):
-    return np.zeros((0, cols))
+# adaptive damping: initial alpha (seed 002: 0.1 1/s)
+ALPHA0 = 0.1
 
 
 @dataclass
@@ -77,33 +78,235 @@ class Dynamics:
     energy_limit: float = 1e3      # kinetic energy may not exceed this times the reference energy
 
 
-class BodySystem:
-    """What every engine (spheres and clumps, polyhedra) shares: energy measures and snapshots.
 
-    Subclasses provide the arrays (x, v, w, L, mass, inert, ...), ``plan``, ``gravity``, the
-    loss accumulators (losses0, esph, ebody, eacc), ``strain_energy()`` and ``_MUTABLE``:
-    the attributes the step loop changes.
+def actor_loads(actors, body_of_primitive, nb):
+    """(load (n_b, N_LOAD), nsmall) of the ``actors`` group (see docs/state.md).
+
+    Actors (loading plate, sleeper) must be the last bodies, and their primitives the last
+    primitives: primitives 0..nsmall-1 go through the cell grid, the actors' are paired by
+    :func:`demcli.kernels.neighbors.add_actor_pairs`.
+    """
+    load = np.zeros((nb, M.N_LOAD))
+    body = np.asarray(actors.get("body", np.zeros(0, np.int64)), np.int64)
+    n_prim = len(body_of_primitive)
+    if len(body) == 0:
+        return load, n_prim
+    first = int(body.min())
+    if sorted(body.tolist()) != list(range(first, nb)):
+        raise ValueError(f"actors must be the last bodies of the scene; got bodies {body.tolist()} of {nb}")
+    is_actor = np.asarray(body_of_primitive) >= first
+    nsmall = int(np.argmax(is_actor)) if is_actor.any() else n_prim
+    if not np.all(is_actor[nsmall:]):
+        raise ValueError("the actors' spheres must be the last spheres of the scene")
+    for k, b in enumerate(body):
+        load[b, M.L_F0:M.L_F0 + 3] = actors["load_mean"][k]
+        load[b, M.L_F1:M.L_F1 + 3] = actors["load_amplitude"][k]
+        load[b, M.L_OMEGA] = 2.0 * math.pi * float(actors["frequency"][k])
+        load[b, M.L_PHASE] = float(actors["phase"][k])
+        load[b, M.L_T0] = float(actors["start"][k])
+    return load, nsmall
+
+
+def is_polyhedral(groups):
+    """Whether the state's bodies are convex polyhedra (a non-empty ``polyhedra`` group)."""
+    return len(groups.get("polyhedra", {}).get("shape", ())) > 0
+
+
+class System:
+    """Arrays and kernels of one stage, for any body shape.
+
+    Args:
+        groups: state groups ``bodies`` and the shape's (spheres: ``spheres``, optional
+            ``contacts``, ``wall_contacts``, ``bonds``; polyhedra: ``polyhedra``,
+            ``polyhedron_shapes``, optional ``body_contacts``, ``body_wall_contacts``), and
+            optional ``actors``, ``energy``, ``adaptive_damping`` (alpha, ke_prev).
+        materials: list of :class:`~demcli.engine.materials.Material`.
+        model: :class:`~demcli.engine.materials.ContactModel` (polyhedra: only ``pairs``).
+        plan: :class:`~demcli.engine.plan.Plan`.
+        walls: :class:`Walls` (polyhedra: planes only).
+        dynamics: :class:`Dynamics`; ``skin`` is a fraction of the mean primitive radius
+            (spheres, or polyhedron bounding spheres).
+        dt: time step [s]. time, step: clock of the input state.
+        mass_scale: mass scaling for quasi-static runs: masses and inertias x factor inside
+            the engine, gravity / factor (weights stay real, the critical step grows by its
+            square root), ``groups()`` unscaled. A power of 2 keeps the round trip exact.
+        contact_damping, adaptive_damping: switch those effects on or off without a plan
+            entry (None: from the plan).
+        alpha0: initial adaptive alpha [1/s] (seed 002: 0.1).
+        alpha_bounds: (min, max) of alpha as multiples of alpha0 and of 1/dt:
+            alpha in [alpha0 x min, max / dt]. The seed's rule is unbounded; the floor
+            keeps alpha from decaying towards zero during a long quiet phase (0.99^n)
+            so that it can react within tens of steps, the ceiling keeps the damping
+            factor (1 - alpha dt/4)/(1 + alpha dt/4) of a half kick positive.
     """
 
-    _MUTABLE = ()
+    def __init__(self, groups, materials, model, plan, walls, dynamics, dt, time=0.0, step=0, mass_scale=1.0,
+                 contact_damping=None, adaptive_damping=None, alpha0=ALPHA0, alpha_bounds=(1e-3, 1.0)):
+        from demcli.engine.poly_shape import PolyShape
+        from demcli.engine.sphere_shape import SphereShape
 
-    @property
-    def rotation_from_angmom(self):
-        """Bodies with a general inertia tensor: rotational energy omega.L / 2."""
-        return self.clumps
+        self.plan = plan
+        self.materials = list(materials)
+        self.model = model
+        self.walls = walls
+        self.dyn = dynamics
+        self.dt = float(dt)
+        self.time = float(time)
+        self.step = int(step)
+        flags = list(plan.flags)
+        flags[K.F_DASHPOT] = plan.has("contact_damping") if contact_damping is None else bool(contact_damping)
+        flags[K.F_ADAPTIVE] = plan.has("adaptive_damping") if adaptive_damping is None else bool(adaptive_damping)
+        self.flags = tuple(flags)
+        self.contact_damping = self.flags[K.F_DASHPOT]
+        self.adaptive_damping = self.flags[K.F_ADAPTIVE]
+        b = groups["bodies"]
+        self.body_id = np.ascontiguousarray(b["id"], np.int64)
+        self.x = np.ascontiguousarray(b["x"], np.float64).copy()
+        self.v = np.ascontiguousarray(b["v"], np.float64).copy()
+        self.w = np.ascontiguousarray(b["omega"], np.float64).copy()
+        self.q = np.ascontiguousarray(b["q"], np.float64).copy()
+        qn = np.linalg.norm(self.q, axis=1)
+        off = np.abs(qn - 1.0) > 1e-12  # renormalize only what is off (a resumed state stays bit-exact)
+        self.q[off] /= qn[off, None]
+        self.mass_scale = float(mass_scale)
+        self.mass = np.ascontiguousarray(b["mass"], np.float64) * self.mass_scale
+        self.inert = np.ascontiguousarray(b["inertia"], np.float64) * self.mass_scale
+        self.bflags = np.ascontiguousarray(b["flags"], np.int8)
+        nb = len(self.mass)
+        self.f = np.ascontiguousarray(b.get("force", np.zeros((nb, 3))), np.float64).copy()
+        self.tq = np.ascontiguousarray(b.get("torque", np.zeros((nb, 3))), np.float64).copy()
+        self._angmom = b.get("angmom")
+        self._setup_walls(walls)
+        self.shape = (PolyShape if is_polyhedral(groups) else SphereShape)(self, groups)
+        n_prim = len(self.rad)
+        self._actors = {k: np.asarray(val) for k, val in groups.get("actors", {}).items()}
+        self.bload, self.nsmall = actor_loads(self._actors, self.shape.body_of_primitive(self), nb)
+        energy = self.flags[K.F_ENERGY]
+        eg = groups.get("energy", {})
+        self.esph = np.zeros((n_prim if energy else 0, 2))
+        self.ebody = np.zeros(nb if energy else 0)
+        self.eacc = np.zeros(1)
+        self.losses0 = {k: float(np.asarray(eg.get(k, 0.0))) for k in ("damping", "friction", "body_damping",
+                                                                       "wall_work")}
+        self.alpha0 = float(alpha0)
+        self.alpha_bounds = tuple(float(a) for a in alpha_bounds)
+        self.adamp = np.zeros(M.N_ADAMP)
+        ag = groups.get("adaptive_damping", {})
+        self.adamp[M.A_ALPHA] = float(np.asarray(ag.get("alpha", alpha0)))
+        self.adamp[M.A_KE] = float(np.asarray(ag.get("ke_prev", self.kinetic_energy())))
+        self.adamp[M.A_MIN] = self.alpha0 * self.alpha_bounds[0]
+        self.adamp[M.A_MAX] = math.inf
+        self.counters = np.zeros(K.N_COUNTERS, np.int64)
+        self.info = np.zeros(4)
+        self.nl = self.shape.initial_lists(self, groups)
+        self.skin = self.dyn.skin * float(self.rad.mean()) if n_prim else 0.0
+        self.max_cells = max(64, 8 * n_prim)
+        self._fresh_lists = True
+        self.prime = True  # evaluate F(x_0) before the first step; False when resuming from stored loads
+        self.gravity = np.asarray(dynamics.gravity, np.float64) / self.mass_scale
+        self.ke_limit = math.inf
 
-    def _angmom_from_omega(self):
-        """L = R diag(I) R^T omega for each body (world frame)."""
+    def _setup_walls(self, walls):
+        """Kernel dtypes for the wall arrays (in place: the engine changes radius and prm of
+        pressure-loaded and servo walls), and the arrays the step loop moves."""
+        walls.kind = np.ascontiguousarray(walls.kind, np.int8)
+        walls.normal = np.ascontiguousarray(walls.normal, np.float64)
+        walls.radius = np.ascontiguousarray(walls.radius, np.float64)
+        walls.material = np.ascontiguousarray(walls.material, np.int64)
+        walls.control = np.ascontiguousarray(walls.control, np.int8)
+        walls.prm = np.ascontiguousarray(walls.prm, np.float64)
+        self.wforce = np.zeros((len(walls), 3))
+        self.wkn = np.zeros(len(walls))
+        self.wpoint = np.ascontiguousarray(walls.point, np.float64).copy()
+        self.wpoint0 = self.wpoint.copy()
+        self.wv = np.ascontiguousarray(walls.v, np.float64).copy()
+
+    def angmom_from_omega(self):
+        """L = R diag(I) R^T omega for each body (world frame), or the stored angular momentum."""
+        if self._angmom is not None:
+            return np.ascontiguousarray(self._angmom, np.float64) * self.mass_scale
         from scipy.spatial.transform import Rotation
 
         rot = Rotation.from_quat(self.q[:, [1, 2, 3, 0]])  # scipy: scalar last
         wb = rot.inv().apply(self.w)
         return np.ascontiguousarray(rot.apply(wb * self.inert))
 
+    # ---- time stepping --------------------------------------------------------------
+    @property
+    def alpha(self):
+        """Current adaptive damping coefficient alpha [1/s] (seed 002, eqs. 23-27)."""
+        return float(self.adamp[M.A_ALPHA])
+
+    @alpha.setter
+    def alpha(self, value):
+        self.adamp[M.A_ALPHA] = float(value)
+
+    @property
+    def rigid(self):
+        """Bodies with a general inertia tensor integrate L (clumps, polyhedra)."""
+        return len(self.L) == len(self.x) and len(self.x) > 0
+
+    rotation_from_angmom = rigid
+
+    def critical_dt(self):
+        """Critical time step of this scene [s] (the shape's estimate; see its ``critical_dt``)."""
+        return self.shape.critical_dt(self)
+
+    @staticmethod
+    def step_kernel():
+        """The compiled step loop :meth:`advance` calls (numba dispatcher)."""
+        from demcli.kernels.engine import run_steps
+
+        return run_steps
+
+    def kernel_params(self):
+        """The Params tuple of the next chunk."""
+        d = self.dyn
+        return K.Params(self.dt, int(self.law), self.gravity, float(d.local_damping), float(d.viscous_damping),
+                        float(self.skin), int(self.max_cells), int(self.nsmall), int(d.check_every),
+                        float(d.overlap_limit), float(self.ke_limit))
+
+    def kernel_bodies(self):
+        """The Bodies tuple (the arrays themselves: the engine updates them in place)."""
+        return K.Bodies(self.x, self.v, self.w, self.q, self.L, self.f, self.tq, self.mass, self.inert, self.bflags,
+                        self.bload)
+
+    def kernel_walls(self):
+        """The WallArrays tuple (updated in place)."""
+        w = self.walls
+        return K.WallArrays(w.kind, self.wpoint, w.normal, w.radius, self.wv, w.material, w.control, w.prm,
+                            self.wforce, self.wkn)
+
+    def advance(self, nsteps):
+        """Run ``nsteps`` steps in compiled code; returns (status, steps done)."""
+        from demcli.kernels.engine import run_steps
+
+        self.adamp[M.A_MAX] = self.alpha_bounds[1] / self.dt if self.dt > 0 else math.inf
+        bonds, bprm = self.shape.bond_arrays(self)
+        status, done, self.time, self.nl = run_steps(
+            int(nsteps), self.time, self.flags, self.prm, self.kernel_params(), self.kernel_bodies(),
+            self.shape.geometry(self), self.shape.members(self), self.kernel_walls(), self.nl, bonds, bprm,
+            self.adamp, self.esph, self.ebody, self.eacc, self.counters, self.info, self._fresh_lists, self.step,
+            self.prime)
+        self._fresh_lists = False
+        self.prime = False
+        self.step += int(done)
+        self.shape.after_advance(self)
+        return int(status), int(done)
+
+    def set_actor_start(self, name, t0):
+        """Start time [s] of the oscillating load of the actor ``name``."""
+        names = [n.decode() if isinstance(n, bytes) else str(n) for n in self._actors["name"]]
+        k = names.index(name)
+        self._actors["start"] = self._actors["start"].astype(np.float64)
+        self._actors["start"][k] = t0
+        self.bload[int(self._actors["body"][k]), M.L_T0] = t0
+
+    # ---- measures -------------------------------------------------------------------
     def kinetic_energy(self):
         """Translational plus rotational kinetic energy [J] (fixed summation order)."""
         ke = 0.5 * float(np.sum(self.mass * np.einsum("ij,ij->i", self.v, self.v)))
-        if self.rotation_from_angmom:
+        if self.rigid:
             ke += 0.5 * float(np.sum(np.einsum("ij,ij->i", self.w, self.L)))
         else:
             ke += 0.5 * float(np.sum(self.inert[:, 0] * np.einsum("ij,ij->i", self.w, self.w)))
@@ -113,10 +316,14 @@ class BodySystem:
         """-sum m g.x [J] (zero at the origin)."""
         return -float(np.sum(self.mass * (self.x @ self.gravity))) if self.plan.has("gravity") else 0.0
 
+    def strain_energy(self):
+        """Elastic energy in contacts and bonds [J] (the shape's; polyhedra: an estimate)."""
+        return self.shape.strain_energy(self)
+
     def losses(self):
         """Cumulative energy [J]: contact dashpots, slip, body damping, and work done by walls."""
         d = dict(self.losses0)
-        if self.plan.has("energy"):
+        if self.flags[K.F_ENERGY]:
             d["damping"] += float(self.esph[:, 0].sum())
             d["friction"] += float(self.esph[:, 1].sum())
             d["body_damping"] += float(self.ebody.sum())
@@ -132,246 +339,13 @@ class BodySystem:
                         + rec["body_damping"] - rec["wall_work"])
         return rec
 
-    def snapshot(self):
-        """Copies of everything the step loop mutates (to restore the last good state)."""
-        return {k: (tuple(a.copy() for a in getattr(self, k)) if k == "nl" else
-                    getattr(self, k).copy() if isinstance(getattr(self, k), np.ndarray) else getattr(self, k))
-                for k in self._MUTABLE}
+    def contact_count(self):
+        """(primitive-primitive contacts, primitive-wall contacts) touching at the last evaluation."""
+        return self.shape.contact_count(self)
 
-    def restore(self, snap):
-        for k, val in snap.items():
-            cur = getattr(self, k)
-            if isinstance(cur, np.ndarray):
-                cur[...] = val
-            else:
-                setattr(self, k, val)
-        self._fresh_lists = True
-
-
-class System(BodySystem):
-    """Arrays and kernels of one stage.
-
-    Args:
-        groups: state groups ``bodies``, ``spheres`` and optional ``contacts``,
-            ``wall_contacts``, ``energy``.
-        materials: list of :class:`~demcli.engine.materials.Material`.
-        model: :class:`~demcli.engine.materials.ContactModel`.
-        plan: :class:`~demcli.engine.plan.Plan`.
-        walls: :class:`Walls`.
-        dynamics: :class:`Dynamics`.
-        dt: time step [s].
-        time, step: clock of the input state.
-        mass_scale: mass scaling for quasi-static runs (as for polyhedra): masses and
-            inertias x factor inside the engine, gravity / factor, ``groups()`` unscaled.
-    """
-
-    def __init__(self, groups, materials, model, plan, walls, dynamics, dt, time=0.0, step=0, mass_scale=1.0):
-        from demcli.engine.bonds import BondSet
-
-        self.plan = plan
-        self.materials = list(materials)
-        self.model = model
-        self.walls = walls
-        self.dyn = dynamics
-        self.dt = float(dt)
-        self.time = float(time)
-        self.step = int(step)
-        self.law = LAWS[model.law]
-        self.flags = plan.flags
-        self.prm = pair_table(self.materials, model)
-        b = groups["bodies"]
-        s = groups["spheres"]
-        self.body_id = np.ascontiguousarray(b["id"], np.int64)
-        self.x = np.ascontiguousarray(b["x"], np.float64).copy()
-        self.v = np.ascontiguousarray(b["v"], np.float64).copy()
-        self.w = np.ascontiguousarray(b["omega"], np.float64).copy()
-        self.q = np.ascontiguousarray(b["q"], np.float64).copy()
-        self.mass_scale = float(mass_scale)
-        self.mass = np.ascontiguousarray(b["mass"], np.float64) * self.mass_scale
-        self.inert = np.ascontiguousarray(b["inertia"], np.float64) * self.mass_scale
-        self.bflags = np.ascontiguousarray(b["flags"], np.int8)
-        nb = len(self.mass)
-        self.f = np.ascontiguousarray(b.get("force", np.zeros((nb, 3))), np.float64).copy()
-        self.tq = np.ascontiguousarray(b.get("torque", np.zeros((nb, 3))), np.float64).copy()
-        self.clumps = self.flags[K.F_CLUMPS]
-        self.sbody = np.ascontiguousarray(s["body"], np.int64)
-        self.soff = np.ascontiguousarray(s["offset"], np.float64)
-        self.rad = np.ascontiguousarray(s["radius"], np.float64).copy()
-        self.smat = np.ascontiguousarray(s["material"], np.int64)
-        ns = len(self.rad)
-        if self.clumps:
-            self.L = np.ascontiguousarray(b["angmom"], np.float64) * self.mass_scale if "angmom" in b \
-                else self._angmom_from_omega()
-            self.xs = np.zeros((ns, 3))
-            self.vs = np.zeros((ns, 3))
-            self.ws = np.zeros((ns, 3))
-            self.fs = np.zeros((ns, 3))
-            self.ts = np.zeros((ns, 3))
-            order = np.argsort(self.sbody, kind="stable")
-            self.mstart = np.searchsorted(self.sbody[order], np.arange(nb + 1)).astype(np.int64)
-            self.mlist = order.astype(np.int64)
-            self._place_members()
-        else:
-            if ns != nb or not np.array_equal(self.sbody, np.arange(nb)):
-                raise ValueError("a spheres-only scene needs sphere i to be body i")
-            self.L = _empty2(3)
-            self.xs, self.vs, self.ws, self.fs, self.ts = self.x, self.v, self.w, self.f, self.tq
-            self.mstart = np.zeros(1, np.int64)
-            self.mlist = _EMPTY_I
-        self.smass = np.ascontiguousarray(self.mass[self.sbody])
-        self.wforce = np.zeros((len(walls), 3))
-        self.wkn = np.zeros(len(walls))
-        self.wpoint = np.ascontiguousarray(walls.point, np.float64).copy()
-        self.wpoint0 = self.wpoint.copy()
-        self.wv = np.ascontiguousarray(walls.v, np.float64).copy()
-        energy = plan.has("energy")
-        eg = groups.get("energy", {})
-        self.esph = np.zeros((ns if energy else 0, 2))
-        self.ebody = np.zeros(nb if energy else 0)
-        self.eacc = np.zeros(1)
-        self.losses0 = {k: float(np.asarray(eg.get(k, 0.0))) for k in ("damping", "friction", "body_damping", "wall_work")}
-        self.counters = np.zeros(K.N_COUNTERS, np.int64)
-        self.info = np.zeros(4)
-        self.nl = self._initial_lists(groups)
-        self.skin = self.dyn.skin * float(self.rad.mean()) if ns else 0.0
-        self.max_cells = max(64, 8 * ns)
-        self._fresh_lists = True
-        self.prime = True  # evaluate F(x_0) before the first step; False when resuming from stored loads
-        self.gravity = np.asarray(dynamics.gravity, np.float64) / self.mass_scale
-        self.ke_limit = math.inf
-        self.bonds = BondSet.from_groups(groups, ns) if plan.has("bonds") else BondSet.empty(ns)
-        self._bond_arrays = self.bonds.kernel_arrays()
-
-    # ---- bonds ------------------------------------------------------------------------
-    def bond_touching(self, gap, fraction=1.0, rng=None, stress_free=False):
-        """Bond every touching pair whose material pair has a bond model (surfaces closer
-        than ``gap`` [m]), or a random ``fraction`` of them drawn with ``rng``; returns the
-        number of new bonds. The pair list is rebuilt. ``stress_free``: contact bonds hold
-        no force at their installed overlap (:meth:`BondSet.bond_touching`)."""
-        if not self.plan.has("bonds"):
-            raise ValueError("bonds are not an effect of this stage")
-        n = self.bonds.bond_touching(self.xs, self.rad, self.smat, self.sbody, gap, fraction, rng, stress_free)
-        self._bond_arrays = self.bonds.kernel_arrays()
-        self._fresh_lists = True
-        # contacts a bond now replaces are no longer contacts (the rebuilt list leaves them out)
-        bd = self.bonds
-        replaces = bd.replacing()
-        bonded = set(zip(bd.i[replaces].tolist(), bd.j[replaces].tolist()))
-        nl = self.nl
-        for c in np.nonzero(nl[K.NL_ACT])[0]:
-            if (int(nl[K.NL_PI][c]), int(nl[K.NL_PJ][c])) in bonded:
-                nl[K.NL_ACT][c] = 0
-        return n
-
-    def _bond_table(self):
-        """The bond models with their Burgers step coefficients for the current dt (cached)."""
-        key = (self.dt, self.bonds.prm.tobytes())
-        if getattr(self, "_bond_table_key", None) != key:
-            self._bond_table_key = key
-            self._bond_table_cache = self.bonds.kernel_table(self.dt)
-        return self._bond_table_cache
-
-    @property
-    def bond_state(self):
-        return self.bonds.state
-
-    @property
-    def bond_hist(self):
-        return self.bonds.hist
-
-    # ---- set-up helpers -------------------------------------------------------------
-    def _place_members(self):
-        from scipy.spatial.transform import Rotation
-
-        rot = Rotation.from_quat(self.q[:, [1, 2, 3, 0]])
-        off = rot[self.sbody].apply(self.soff) if len(self.sbody) else np.zeros((0, 3))
-        self.xs[:] = self.x[self.sbody] + off
-        self.vs[:] = self.v[self.sbody] + np.cross(self.w[self.sbody], off)
-        self.ws[:] = self.w[self.sbody]
-
-    def _initial_lists(self, groups):
-        """Neighbour state seeded with the stored contacts: their history for carry-over, and
-        their forces and touching flags, so that :meth:`groups` of a system not yet stepped
-        gives back the stored contacts (a stage resumed from a checkpoint of its last step)."""
-        ns = len(self.rad)
-        start, ci, cj, ft, mr, fc = self._stored_history(groups.get("contacts", {}), "i", "j", ns)
-        wstart, ws_, ww, wft, wmr, wf = self._stored_history(groups.get("wall_contacts", {}), "sphere", "wall", ns)
-        wfc = np.zeros((len(ww), 5))
-        wfc[:, :3] = wf
-        return (start, ci, cj, np.zeros(ns + 1, np.int64), _EMPTY_I,
-                ft, mr, fc, _empty2(3), np.ones(len(ci), np.uint8), _empty2(2),
-                wstart, ws_, ww, wft, wmr, wfc,
-                self.xs.copy(), np.zeros((len(self.walls), 3)))
-
-    def _stored_history(self, group, key_a, key_b, ns):
-        """(CSR start, a, b, ft, mr, force) of stored contacts sorted by (a, b) (the kernels'
-        canonical order); history rows only for the active effects."""
-        a = np.asarray(group.get(key_a, _EMPTY_I), np.int64)
-        b = np.asarray(group.get(key_b, _EMPTY_I), np.int64)
-        order = np.lexsort((b, a))
-        a, b = np.ascontiguousarray(a[order]), np.ascontiguousarray(b[order])
-        start = np.searchsorted(a, np.arange(ns + 1)).astype(np.int64)
-        force = np.zeros((len(a), 3))
-        if "force" in group:
-            force[:] = np.asarray(group["force"], np.float64)[order]
-        hist = []
-        for name, flag in (("ft", K.F_FRICTION), ("mr", K.F_ROLLING)):
-            if not self.flags[flag]:
-                hist.append(_empty2(3))
-            elif name in group:
-                hist.append(np.ascontiguousarray(group[name][order], np.float64))
-            else:
-                hist.append(np.zeros((len(a), 3)))
-        return start, a, b, hist[0], hist[1], force
-
-    # ---- time stepping --------------------------------------------------------------
-    def critical_dt(self):
-        """Critical time step of this scene [s]: :func:`critical_time_step` of the contacts,
-        lowered by the bonds (their omega^2 added to the contacts', a bond and a contact
-        acting side by side; :meth:`BondSet.critical_omega2`)."""
-        dt = critical_time_step(self.model, self.prm, self.materials, self.mass, self.rad, self.sbody, self.smat)
-        if self.model.law != "linear":  # the Rayleigh step follows the density, scaled with the masses
-            dt *= math.sqrt(self.mass_scale)
-        if not len(self.bonds.prm) or not len(self.rad):
-            return dt
-        w2 = self.bonds.critical_omega2(float(self.smass.min()), float(self.inert.min()), float(self.rad.min()))
-        return 2.0 / math.sqrt((2.0 / dt) ** 2 + w2) if w2 > 0 else dt
-
-    @staticmethod
-    def step_kernel():
-        """The compiled step loop :meth:`advance` calls (numba dispatcher)."""
-        from demcli.kernels.step import run_steps
-
-        return run_steps
-
-    def advance(self, nsteps):
-        """Run ``nsteps`` steps in compiled code; returns (status, steps done)."""
-        from demcli.kernels.step import run_steps
-
-        w = self.walls
-        replacing = self.bonds.replacing()
-        status, done, self.time, self.nl = run_steps(
-            int(nsteps), self.time, self.dt, self.law, self.flags, self.prm, self.gravity,
-            float(self.dyn.local_damping), float(self.dyn.viscous_damping),
-            (self.x, self.v, self.w, self.q, self.L, self.f, self.tq), self.mass, self.inert, self.bflags,
-            (self.xs, self.vs, self.ws, self.fs, self.ts), self.rad, self.smat, self.smass, self.sbody,
-            self.soff, self.mstart, self.mlist,
-            w.kind, self.wpoint, w.normal, w.radius, self.wv, w.material, w.control, w.prm,
-            self.wforce, self.wkn,
-            self.nl, self.skin, self.max_cells,
-            self.esph, self.ebody, self.eacc, self._bond_arrays, self._bond_table(),
-            int(self.dyn.check_every), float(self.dyn.overlap_limit), float(self.ke_limit),
-            self.counters, self.info, self._fresh_lists, self.step, self.prime)
-        self._fresh_lists = False
-        self.prime = False
-        self.step += int(done)
-        if len(self.bonds) and not np.array_equal(replacing, self.bonds.replacing()):
-            self._fresh_lists = True  # a bond broke or a seated pair came apart: it joins the contact list
-        return int(status), int(done)
-
-    # ---- measures -------------------------------------------------------------------
-    _MUTABLE = ("x", "v", "w", "q", "L", "f", "tq", "xs", "vs", "ws", "fs", "ts", "wpoint", "wv", "wforce", "esph",
-                "ebody", "eacc", "nl", "time", "step", "bond_state", "bond_hist", "wall_radius", "wall_params")
+    # ---- snapshots ------------------------------------------------------------------
+    _MUTABLE = ("x", "v", "w", "q", "L", "f", "tq", "wpoint", "wv", "wforce", "esph", "ebody", "eacc", "adamp", "nl",
+                "time", "step", "bond_state", "bond_hist", "wall_radius", "wall_params")
 
     @property
     def wall_radius(self):
@@ -383,54 +357,90 @@ class System(BodySystem):
         """Wall control rows (a pressure-loaded membrane keeps its radial rate there)."""
         return self.walls.prm
 
-    def strain_energy(self):
-        """Elastic energy in contacts and bonds [J]."""
-        from demcli.kernels.bonds import bond_strain_energy
-        from demcli.kernels.step import total_strain_energy
+    @property
+    def bond_state(self):
+        return self.bonds.state
 
-        nl = self.nl
+    @property
+    def bond_hist(self):
+        return self.bonds.hist
+
+    def snapshot(self):
+        """Copies of everything the step loop mutates (to restore the last good state)."""
+        out = {}
+        for k in self._MUTABLE + self.shape.MUTABLE:
+            val = getattr(self, k)
+            if isinstance(val, K.Contacts):
+                out[k] = K.Contacts(*(a.copy() for a in val))
+            elif isinstance(val, np.ndarray):
+                out[k] = val.copy()
+            else:
+                out[k] = val
+        return out
+
+    def restore(self, snap):
+        """Back to a :meth:`snapshot`; the lists are rebuilt at the next step."""
+        for k, val in snap.items():
+            cur = getattr(self, k)
+            if isinstance(cur, np.ndarray):
+                cur[...] = val
+            else:
+                setattr(self, k, val)
+        self._fresh_lists = True
+
+    # ---- state exchange -------------------------------------------------------------
+    def groups(self):
+        """State groups of the current scene: bodies, walls, energy, actors and adaptive damping
+        (when present), and the shape's groups (particles and contacts)."""
+        bodies = {"x": self.x.copy(), "v": self.v.copy(), "q": self.q.copy(), "omega": self.w.copy(),
+                  "mass": self.mass / self.mass_scale, "inertia": self.inert / self.mass_scale,
+                  "id": self.body_id.copy(), "flags": self.bflags.copy(), "force": self.f.copy(),
+                  "torque": self.tq.copy()}
+        if self.rigid:
+            bodies["angmom"] = self.L / self.mass_scale
         w = self.walls
-        bd = self.bonds
-        eb = float(bond_strain_energy(bd.start, bd.j, bd.model, bd.state, bd.hist, bd.prm, self.xs, self.rad,
-                                      self.smat, self.prm, self.law, self.flags[K.F_FRICTION],
-                                      self.flags[K.F_ROLLING])) if len(bd) else 0.0
-        return eb + float(total_strain_energy(
-            nl[K.NL_PI], nl[K.NL_PJ], self.xs, self.rad, self.smat, self.prm, self.law, nl[K.NL_FT], nl[K.NL_MR],
-            self.flags[K.F_FRICTION], self.flags[K.F_ROLLING], nl[K.NL_WSTART], nl[K.NL_WWALL], w.kind, self.wpoint,
-            w.normal, w.radius, w.material, nl[K.NL_WFT], nl[K.NL_WMR]))
+        walls = {"name": np.array(w.name, dtype=object), "kind": w.kind.copy(), "point": self.wpoint.copy(),
+                 "normal": w.normal.copy(), "radius": w.radius.copy(), "v": self.wv.copy(),
+                 "material": w.material.copy(), "control": w.control.copy(), "target": w.prm[:, 0].copy(),
+                 "force": self.wforce.copy(),
+                 "extent": np.asarray(w.extent) + np.tile(self.wpoint - self.wpoint0, 2)}
+        out = {"bodies": bodies}
+        out.update(self.shape.groups(self))
+        out["walls"] = walls
+        out["energy"] = {k: np.float64(v) for k, v in self.losses().items()}
+        if len(self._actors):
+            out["actors"] = {k: v.copy() for k, v in self._actors.items()}
+        if self.adaptive_damping:
+            out["adaptive_damping"] = {"alpha": np.float64(self.adamp[M.A_ALPHA]),
+                                       "ke_prev": np.float64(self.adamp[M.A_KE])}
+        return out
+
+    # ---- sphere scenes (bonds, measures on spheres) -----------------------------------
+    def _spheres_only(self, what):
+        if self.shape.name != "spheres":
+            raise ValueError(f"{what} is for sphere and clump scenes; this scene holds {self.shape.name}")
+
+    def bond_touching(self, gap, fraction=1.0, rng=None, stress_free=False):
+        """Bond touching sphere pairs (:meth:`demcli.engine.sphere_shape.SphereShape.bond_touching`)."""
+        self._spheres_only("bonding")
+        return self.shape.bond_touching(self, gap, fraction, rng, stress_free)
 
     def stress(self, volume):
         """Mean stress in the particles [Pa], (3, 3), compression positive: the contact and
         bond virial over ``volume`` [m^3] (:func:`demcli.kernels.measures.contact_virial`)."""
-        from demcli.kernels.measures import contact_virial
-
-        nl = self.nl
-        w = self.walls
-        ba = self._bond_arrays
-        return contact_virial(nl[K.NL_PI], nl[K.NL_PJ], nl[K.NL_ACT], nl[K.NL_FC], self.xs, nl[K.NL_WSTART],
-                              nl[K.NL_WWALL], nl[K.NL_WFC], w.kind, self.wpoint, w.normal, w.radius,
-                              ba[0], ba[1], ba[7]) / volume
+        self._spheres_only("the contact virial")
+        return self.shape.stress(self, volume)
 
     def contacts_per_sphere(self):
         """(n_s,) touching sphere-sphere contacts, intact bonds and seated pairs compressed beyond
         their delta_0 of each sphere."""
-        nl = self.nl
-        act = nl[K.NL_ACT].astype(bool)
-        n = len(self.rad)
-        z = np.bincount(nl[K.NL_PI][act], minlength=n) + np.bincount(nl[K.NL_PJ][act], minlength=n)
-        bd = self.bonds
-        if len(bd):
-            from demcli.kernels import bonds as B
-
-            i, j = bd.i, bd.j
-            delta = self.rad[i] + self.rad[j] - np.linalg.norm(self.xs[i] - self.xs[j], axis=1)
-            ok = (bd.state == B.INTACT) | (bd.seated() & (delta > bd.hist[:, B.H_D0]))
-            z = z + np.bincount(i[ok], minlength=n) + np.bincount(j[ok], minlength=n)
-        return z
+        self._spheres_only("the coordination per sphere")
+        return self.shape.contacts_per_sphere(self)
 
     def scale_radii(self, factor):
         """Spheres-only scenes: radii x factor (scalar or per sphere), masses x factor^3 and
         inertias x factor^5 (same density); the lists are rebuilt at the next step."""
+        self._spheres_only("radius scaling")
         if self.clumps:
             raise ValueError("radius scaling is for spheres-only scenes")
         f = np.broadcast_to(np.asarray(factor, np.float64), self.rad.shape)
@@ -439,49 +449,3 @@ class System(BodySystem):
         self.inert *= (f ** 5)[:, None]
         self.smass[:] = self.mass
         self._fresh_lists = True
-
-    def contact_count(self):
-        """(sphere-sphere contacts, sphere-wall contacts) touching now."""
-        nl = self.nl
-        n_pp = int(nl[K.NL_ACT].sum())
-        wfc = nl[K.NL_WFC]
-        n_pw = int(np.count_nonzero(np.any(wfc[:, :3] != 0.0, axis=1))) if len(wfc) else 0
-        return n_pp, n_pw
-
-    # ---- state exchange -------------------------------------------------------------
-    def groups(self):
-        """State groups of the current scene (bodies, spheres, contacts, walls, energy)."""
-        nl = self.nl
-        act = nl[K.NL_ACT].astype(bool)
-        contacts = {"i": nl[K.NL_PI][act].copy(), "j": nl[K.NL_PJ][act].copy(), "force": nl[K.NL_FC][act].copy()}
-        if self.flags[K.F_FRICTION]:
-            contacts["ft"] = nl[K.NL_FT][act].copy()
-        if self.flags[K.F_ROLLING]:
-            contacts["mr"] = nl[K.NL_MR][act].copy()
-        wfc = nl[K.NL_WFC]
-        wact = np.any(wfc[:, :3] != 0.0, axis=1) if len(wfc) else np.zeros(0, bool)
-        wall_contacts = {"sphere": nl[K.NL_WSPH][wact].copy(), "wall": nl[K.NL_WWALL][wact].copy(), "force": wfc[wact, :3].copy()}
-        if self.flags[K.F_FRICTION]:
-            wall_contacts["ft"] = nl[K.NL_WFT][wact].copy()
-        if self.flags[K.F_ROLLING]:
-            wall_contacts["mr"] = nl[K.NL_WMR][wact].copy()
-        bodies = {"x": self.x.copy(), "v": self.v.copy(), "q": self.q.copy(), "omega": self.w.copy(),
-                  "mass": self.mass / self.mass_scale, "inertia": self.inert / self.mass_scale,
-                  "id": self.body_id.copy(), "flags": self.bflags.copy(), "force": self.f.copy(),
-                  "torque": self.tq.copy()}
-        if self.clumps:
-            bodies["angmom"] = self.L / self.mass_scale
-        spheres = {"body": self.sbody.copy(), "offset": self.soff.copy(), "radius": self.rad.copy(),
-                   "material": self.smat.copy()}
-        w = self.walls
-        walls = {"name": np.array(w.name, dtype=object), "kind": w.kind.copy(), "point": self.wpoint.copy(),
-                 "normal": w.normal.copy(), "radius": w.radius.copy(), "v": self.wv.copy(),
-                 "material": w.material.copy(), "control": w.control.copy(), "target": w.prm[:, 0].copy(),
-                 "force": self.wforce.copy(),
-                 "extent": w.extent + np.tile(self.wpoint - self.wpoint0, 2)}
-        energy = {k: np.float64(v) for k, v in self.losses().items()}
-        out = {"bodies": bodies, "spheres": spheres, "contacts": contacts, "wall_contacts": wall_contacts,
-               "walls": walls, "energy": energy}
-        if self.plan.has("bonds"):
-            out.update(self.bonds.groups())
-        return out

@@ -1,4 +1,6 @@
-"""Constants shared by the step kernel and the Python plan (importing this loads no numba)."""
+"""Constants and argument tuples shared by the engine kernels and the Python side (importing this loads no numba)."""
+
+from collections import namedtuple
 
 # kernel switches of the one body engine: index into the flags tuple (all bool), set by the plan
 # from the effect registry (demcli.effects.registry: each effect names its flag)
@@ -28,8 +30,31 @@ FIX_Y = 8
 FIX_Z = 16
 LOADED = 32        # an actor: the body carries a prescribed external force (its row of the load table)
 
-# positions in the neighbour-state tuple ``nl`` of :func:`demcli.kernels.step.run_steps`
-NL_FIELDS = ("start", "pi", "pj", "rstart", "rlist", "ft", "mr", "fc", "tj", "act", "epair",
-             "wstart", "wsph", "wwall", "wft", "wmr", "wfc", "xref", "wref")
-(NL_START, NL_PI, NL_PJ, NL_RSTART, NL_RLIST, NL_FT, NL_MR, NL_FC, NL_TJ, NL_ACT, NL_EPAIR,
- NL_WSTART, NL_WSPH, NL_WWALL, NL_WFT, NL_WMR, NL_WFC, NL_XREF, NL_WREF) = range(len(NL_FIELDS))
+# the tuples the engine's kernels take (numba named tuples of arrays and numbers)
+Bodies = namedtuple("Bodies", "x v w q L f tq mass inert flags load")
+"""Body state: x, v, w (omega), L (world angular momentum; rigid rotors), f, tq (the loads of the last
+step) (n_b, 3); q (n_b, 4) body to world (w, x, y, z); mass (n_b,) kg; inert (n_b, 3) principal
+moments kg m^2; flags (n_b,) int8 (FIX_*, LOADED); load (n_b, N_LOAD) actor forces (motion.L_*)."""
+
+Params = namedtuple("Params", "dt law gravity local visc skin max_cells nsmall check_every overlap_limit ke_limit")
+"""Numbers of a run: dt [s]; law (contact law code of the sphere laws); gravity (3,) m/s^2; local
+(Cundall lambda); visc (alpha [1/s]); skin [m]; max_cells; nsmall (primitives 0..nsmall-1 go
+through the cell grid, the rest are actors); check_every; overlap_limit; ke_limit [J]."""
+
+WallArrays = namedtuple("WallArrays", "kind point normal radius v material control prm force kn")
+"""Walls: kind (int8), point, normal, radius, v, material, control (int8), prm (W_* columns),
+force (sum of contact forces on each wall), kn (servo stiffness)."""
+
+Contacts = namedtuple("Contacts", "start pi pj rstart rlist ft mr fc tj act epair geo sep sdir "
+                                  "wstart wprim wwall wft wmr wfc wgeo xref wref")
+"""Neighbour and contact state, rebuilt by the engine: pair CSR (start, pi, pj; i < j) and its
+reverse (rstart, rlist); per pair tangential spring ft, rolling spring mr, force on i fc, torque on
+j tj, touching flag act (uint8), losses epair; polyhedra: geo (depth, F_N, K_t), sep / sdir (the
+cached separating face or direction); per primitive-wall contact wstart, wprim, wwall, wft, wmr,
+wfc (force on the primitive, servo stiffness, normal force), wgeo; xref (positions at the last
+list build), wref (wall displacement since). Arrays of inactive effects have zero rows."""
+CONTACT_FIELDS = Contacts._fields
+
+Members = namedtuple("Members", "mstart mlist xs fs ts")
+"""Clumps: mstart (n_b + 1,), mlist (n_s,) the member spheres of each body; xs their positions, fs, ts
+their loads (n_s, 3). Zero rows (mstart of length 1) when the bodies are their own primitives."""

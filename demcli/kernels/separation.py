@@ -1,6 +1,6 @@
 """Separating directions between two convex vertex sets (GJK distance iteration), numba kernels.
 
-Used by the polyhedron pair pass (:mod:`demcli.kernels.poly_step`) to remember why a listed
+Used by the polyhedron pair pass (:mod:`demcli.kernels.shapes.polyhedra`) to remember why a listed
 pair does not touch: a unit direction u with
 
     gap(u) = min_b u . b - max_a u . a > margin,
@@ -9,7 +9,7 @@ so that B lies beyond A along u by more than ``margin`` [m] and the exact overla
 bodies is empty. Checking a remembered u costs one pass over both vertex sets; the exact
 overlap (:func:`demcli.kernels.polyhedra.overlap_ws`) of such a pair costs ~2 us
 (bench/README.md, "Polyhedron narrow phase"). Face normals separate most such pairs (the
-``P_SEP`` face cache); this covers the rest, pairs separated only across two edges.
+``sep`` face cache); this covers the rest, pairs separated only across two edges.
 
 Search (:func:`separating_direction`): the GJK distance iteration (Gilbert, Johnson & Keerthi
 1988, "A fast procedure for computing the distance between complex objects in three-dimensional

@@ -67,8 +67,6 @@ def make_system(ctx, cfg, groups, time=0.0, step=0, resume=False):
     extra = {}
     if cfg.scaling.mass != 1.0:
         extra["mass_scale"] = cfg.scaling.mass
-    if poly:
-        from demcli.engine.poly_system import PolySystem as System  # noqa: F811
     model = contact_model(cfg)
     if cfg.get("bonds") is not None and cfg.bonds.from_phases:
         import dataclasses

@@ -19,10 +19,11 @@ from test_polyhedra_dynamics import G, RHO, box, planes, random_hull  # noqa: E4
 from demcli.engine.actors import actor_index, add_actor, box_polyhedron, haversine, remove_actors  # noqa: E402
 from demcli.engine.materials import ContactModel, Material  # noqa: E402
 from demcli.engine.plan import make_plan  # noqa: E402
-from demcli.engine.poly_system import PolySystem, polyhedra_groups  # noqa: E402
+from demcli.engine.poly_shape import polyhedra_groups
+from demcli.engine.system import System  # noqa: E402
 from demcli.engine.system import Dynamics  # noqa: E402
 from demcli.kernels.neighbors import build_pairs  # noqa: E402
-from demcli.kernels.poly_step import add_actor_pairs  # noqa: E402
+from demcli.kernels.neighbors import add_actor_pairs# noqa: E402
 
 STEEL = 7800.0
 
@@ -31,7 +32,7 @@ def _scene(groups, effects=("gravity", "friction", "local_damping"), local=0.7, 
     walls = planes([[0, 0, 0]], [[0, 0, 1]])
     plan = make_plan(list(effects), walls=True, polyhedra=True)
     mats = [Material("rock", RHO, young=1e9, friction=0.5, restitution=0.3)]
-    s = PolySystem(groups, mats, ContactModel(), plan, walls, Dynamics(gravity=(0, 0, -G), local_damping=local),
+    s = System(groups, mats, ContactModel(), plan, walls, Dynamics(gravity=(0, 0, -G), local_damping=local),
                    dt=1.0, **kw)
     s.dt = dt_factor * s.critical_dt()
     return s
@@ -147,7 +148,7 @@ def test_resume_with_a_cycling_actor_is_bit_identical():
                   load=haversine(10.0, 200.0, 20.0, start=0.002))
     a = _scene(g)
     a.advance(3000)
-    b = PolySystem(a.groups(), a.materials, a.model, a.plan, a.walls, a.dyn, dt=a.dt, time=a.time, step=a.step)
+    b = System(a.groups(), a.materials, a.model, a.plan, a.walls, a.dyn, dt=a.dt, time=a.time, step=a.step)
     b.prime = False
     # When: both run 3000 more steps
     a.advance(3000)

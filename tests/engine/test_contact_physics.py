@@ -11,8 +11,6 @@ import numpy as np
 import pytest
 from scipy.special import beta as beta_fn
 
-from demcli.kernels.layout import NL_WMR
-
 R = 0.01          # sphere radius [m]
 RHO = 2500.0      # density [kg/m^3]
 G = 9.81
@@ -283,6 +281,6 @@ def test_rolling_resistance_constant_deceleration(build):
     assert a == pytest.approx(-5.0 / 7.0 * mu_r * G, rel=0.005)
     assert np.max(np.abs(slip)) < 5e-3 * v0
     # and the moment carried by the contact is the cap mu_r r F_n (F_n = m g)
-    mr = s.nl[NL_WMR][0]
+    mr = s.nl.wmr[0]
     assert np.linalg.norm(mr) == pytest.approx(mu_r * R * m * G, rel=1e-6)
     assert mr[1] < 0.0                                     # opposing the spin (+y)

@@ -1,7 +1,7 @@
 """Rigid convex polyhedra in motion: statics, friction, collisions, deposition, free rotation.
 
-The engine under test is :class:`demcli.engine.poly_system.PolySystem` with the kernel
-:mod:`demcli.kernels.poly_step`: the seed-002 volumetric law F_N = k_n sqrt(V d),
+The engine under test is :class:`demcli.engine.system.System` (polyhedra) with the kernel
+:mod:`demcli.kernels.shapes.polyhedra`: the seed-002 volumetric law F_N = k_n sqrt(V d),
 k_n = 4E / (3 sqrt(pi)), on the exact overlap of :mod:`demcli.kernels.polyhedra`.
 Each test states its reference and its tolerance (with the measured value).
 """
@@ -15,7 +15,8 @@ from scipy.spatial.transform import Rotation
 
 from demcli.engine.materials import ContactModel, Material
 from demcli.engine.plan import make_plan
-from demcli.engine.poly_system import PolySystem, polyhedra_groups
+from demcli.engine.poly_shape import polyhedra_groups
+from demcli.engine.system import System
 from demcli.engine.system import Dynamics, Walls
 from demcli.geometry import convex_hull
 from demcli.kernels import layout as K
@@ -42,13 +43,13 @@ def planes(points, normals):
 
 def system(polys, x=None, q=None, v=None, omega=None, effects=(), walls=None, gravity=(0.0, 0.0, -G),
            young=1e9, density=RHO, friction=0.5, restitution=0.5, dt_factor=0.1, **kw):
-    """PolySystem of ConvexPolyhedron bodies (one material) with dt = dt_factor x the critical step."""
+    """System of ConvexPolyhedron bodies (one material) with dt = dt_factor x the critical step."""
     groups = polyhedra_groups(polys, density, x=x, q=q, v=v, omega=omega)
     walls = Walls() if walls is None else walls
     plan = make_plan(list(effects), walls=len(walls) > 0)
     dyn_keys = {k: kw.pop(k) for k in list(kw) if k in Dynamics.__dataclass_fields__}
     mats = [Material("rock", density, young=young, friction=friction, restitution=restitution)]
-    s = PolySystem(groups, mats, ContactModel(), plan, walls, Dynamics(gravity=gravity, **dyn_keys), dt=1.0, **kw)
+    s = System(groups, mats, ContactModel(), plan, walls, Dynamics(gravity=gravity, **dyn_keys), dt=1.0, **kw)
     s.dt = dt_factor * s.critical_dt()
     return s
 
@@ -286,10 +287,8 @@ def test_200_random_polyhedra_settle_in_a_box_without_instability():
     assert npp > n and npw > 2 * nx * nx
     assert np.all(s.x > 0.0) and np.all(s.x[:, :2] < side) and np.all(s.x[:, 2] < top)
     assert np.all(np.isfinite(s.x)) and np.all(np.isfinite(s.q))
-    from demcli.kernels.poly_step import P_ACT, P_GEO, P_PI, P_PJ
-
-    act = s.nl[P_ACT].astype(bool)
-    depth = s.nl[P_GEO][act, 0] / np.minimum(s.rad[s.nl[P_PI][act]], s.rad[s.nl[P_PJ][act]])
+    act = s.nl.act.astype(bool)
+    depth = s.nl.geo[act, 0] / np.minimum(s.rad[s.nl.pi[act]], s.rad[s.nl.pj[act]])
     assert depth.max() < 0.02
 
 
@@ -366,7 +365,7 @@ def test_resume_from_groups_is_bit_identical():
     a.advance(4500)
     g = a.groups()
     assert len(g["body_contacts"]["i"]) > 0 and len(g["body_wall_contacts"]["wall"]) > 0 and "ft" in g["body_contacts"]
-    b = PolySystem(g, a.materials, a.model, a.plan, a.walls, a.dyn, dt=dt, time=a.time, step=a.step,
+    b = System(g, a.materials, a.model, a.plan, a.walls, a.dyn, dt=dt, time=a.time, step=a.step,
                    adaptive_damping=True, contact_damping=True)
     b.prime = False  # the dem stage's resume: stored loads, checkpointed accumulators
     b.losses0 = dict(a.losses0)
@@ -436,9 +435,7 @@ def test_inactive_effects_cost_nothing():
     # Then: the friction, energy and damping passes never ran; no history arrays exist
     assert c["friction"] == 0 and c["energy"] == 0 and c["damping"] == 0
     assert c["pairs"] == c["gather"] == 501  # 500 steps + the priming evaluation
-    from demcli.kernels.poly_step import P_FT, P_WFT
-
-    assert s.nl[P_FT].shape == (0, 3) and s.nl[P_WFT].shape == (0, 3) and s.esph.shape == (0, 2)
+    assert s.nl.ft.shape == (0, 3) and s.nl.wft.shape == (0, 3) and s.esph.shape == (0, 2)
     assert "ft" not in s.groups()["body_contacts"]
 
 
@@ -473,7 +470,7 @@ def test_separation_cache_changes_nothing():
     # Given: two copies of the heap with friction and damping; in one, every pair's cached
     # separating face or direction is wiped before every step (the exact overlap runs for every
     # pair whose bounding spheres meet), the other keeps its cache
-    from demcli.kernels.poly_step import P_SEP, SEP_DIR, SEP_NONE
+    from demcli.kernels.shapes.polyhedra import SEP_DIR, SEP_NONE
 
     eff = ["gravity", "friction", "local_damping"]
     a = _heap(effects=eff, local_damping=0.2, contact_damping=True)
@@ -482,11 +479,11 @@ def test_separation_cache_changes_nothing():
     faces = directions = 0
     for _ in range(80):
         a.advance(50)
-        sep = a.nl[P_SEP]
+        sep = a.nl.sep
         faces += np.count_nonzero((sep != 0) & (sep != SEP_NONE) & (sep != SEP_DIR))
         directions += np.count_nonzero(sep == SEP_DIR)
     for _ in range(4000):
-        b.nl[P_SEP][:] = SEP_NONE
+        b.nl.sep[:] = SEP_NONE
         b.advance(1)
     # Then: the cache skipped exact overlaps (it held faces, and directions for pairs that only
     # an edge-edge axis separates) and the runs agree bit for bit

@@ -70,12 +70,10 @@ def _same_run(ref, run, h5_differences, stage):
 ])
 def test_interrupted_anywhere_in_the_stepping_resumes_bit_identical(reference, tmp_path, monkeypatch, h5_differences,
                                                                      case, stage, step):
-    from demcli.engine.poly_system import PolySystem
     from demcli.engine.system import System
 
-    cls = PolySystem if case == POLYHEDRA else System
     # Given Ctrl-C once the stage has stepped to `step`
-    restore = _send_sigint_once(monkeypatch, cls, "advance", lambda s: s.step >= step)
+    restore = _send_sigint_once(monkeypatch, System, "advance", lambda s: s.step >= step)
     with pytest.raises(StageError, match="interrupted at step .*--resume"):
         run_case(ROOT / case, out=tmp_path, quiet=True)
     restore()

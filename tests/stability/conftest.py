@@ -64,7 +64,7 @@ def quat(rotvec):
 
 
 def polyhedra(*args, **kw):
-    """PolySystem of ConvexPolyhedron bodies (one material) with dt = dt_factor x critical: the
+    """System of ConvexPolyhedron bodies (one material) with dt = dt_factor x critical: the
     builder of tests/engine/test_polyhedra_dynamics.py (same keywords, ``density`` included)."""
     import sys
     from pathlib import Path

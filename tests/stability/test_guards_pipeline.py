@@ -1,7 +1,7 @@
 """Each runtime guard of the ``dem`` stage (NaN/Inf, excessive overlap, runaway kinetic energy),
 proven through the pipeline for a sphere scene and a polyhedral scene.
 
-The failure is injected into the running stage: ``System.advance`` / ``PolySystem.advance`` is
+The failure is injected into the running stage: ``System.advance`` is
 wrapped so that, at the first call that starts at step 300 (right after the record at step
 300, where the stage keeps its last good state), it poisons the scene before stepping on. The
 guards run every step (``safety.check_every: 1``), so the stage must stop at step 301 with a
@@ -33,7 +33,7 @@ def _sphere_case(smoke_case, extra=()):
 def _polyhedra_case(tmp_path, extra=()):
     """Four 20 mm cubes (three on the floor, one falling onto them) in an open box: a hand-written
     polyhedral input state ``00-place.h5`` and a case whose ``settle`` dem stage runs on it."""
-    from demcli.engine.poly_system import polyhedra_groups
+    from demcli.engine.poly_shape import polyhedra_groups
     from demcli.geometry import convex_hull
     from scipy.spatial.transform import Rotation
 
@@ -110,7 +110,7 @@ def _inject(monkeypatch, kind, poison):
     if kind == "spheres":
         from demcli.engine.system import System as cls
     else:
-        from demcli.engine.poly_system import PolySystem as cls
+        from demcli.engine.system import System as cls
     real = cls.advance
     seen = {}
 

@@ -131,9 +131,9 @@ def test_volumetric_contact_force_does_no_work_on_a_closed_path(scene):
 def test_undamped_polyhedral_gas_keeps_its_energy(scene):
     # Given: 8 cubes of 8 mm that cannot rotate (flags FIX_ROTATION), random velocities of 0.5 m/s,
     # in a closed 60 mm box, E = 1e7 Pa, no gravity, no damping, dt = 0.1 x critical
-    from demcli.engine.poly_system import PolySystem, polyhedra_groups
     from demcli.engine.plan import make_plan
-    from demcli.engine.system import Dynamics
+    from demcli.engine.poly_shape import polyhedra_groups
+    from demcli.engine.system import Dynamics, System
 
     rng = np.random.default_rng(7)
     side, n = 0.06, 8
@@ -141,8 +141,8 @@ def test_undamped_polyhedral_gas_keeps_its_energy(scene):
     x = np.array([[a, b, c] for a in g for b in g for c in g])
     groups = polyhedra_groups([scene.box(0.008, 0.008, 0.008)] * n, 2600.0, x=x, v=rng.normal(0, 0.5, (n, 3)),
                               flags=np.full(n, K.FIX_ROTATION, np.int8))
-    s = PolySystem(groups, [scene.Material("rock", 2600.0, young=1e7)], scene.ContactModel(),
-                   make_plan(["energy"], walls=True), scene.closed_box(side), Dynamics(gravity=(0.0, 0.0, 0.0)), dt=1.0)
+    s = System(groups, [scene.Material("rock", 2600.0, young=1e7)], scene.ContactModel(),
+               make_plan(["energy"], walls=True), scene.closed_box(side), Dynamics(gravity=(0.0, 0.0, 0.0)), dt=1.0)
     s.dt = 0.1 * s.critical_dt()
     e0 = s.kinetic_energy()
     # When: 3.5 s of gas (170 000 steps; 8 s under make stress)

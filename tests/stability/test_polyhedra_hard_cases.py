@@ -1,8 +1,8 @@
 """Hard cases for the polyhedral engine: the seed's stiffness with the automatic step, 50 m/s
 impacts on a wall, a plate pierced by a fast plate, a dense start with 10 % overlaps.
 
-Engine: :class:`demcli.engine.poly_system.PolySystem`, volumetric law F_N = k_n sqrt(V d),
-critical step 2 / sqrt(2 k_n sqrt(A_face) (1/m + c_rot)) (``PolySystem.critical_dt``). Every test
+Engine: :class:`demcli.engine.system.System` (polyhedra), volumetric law F_N = k_n sqrt(V d),
+critical step 2 / sqrt(2 k_n sqrt(A_face) (1/m + c_rot)) (``PolyShape.critical_dt``). Every test
 states its reference and tolerance and the value measured when it was written; the
 numbers are collected in docs/stability.md. ``DEMCLI_STRESS=1`` runs bigger variants.
 """
@@ -14,7 +14,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from demcli.kernels import layout as K
-from demcli.kernels.poly_step import P_ACT, P_GEO, P_PI, P_PJ, P_WBODY, P_WGEO, Q_KN
+from demcli.kernels.shapes.polyhedra import Q_KN
 
 G = 9.81
 
@@ -32,7 +32,7 @@ def stones(rng, n, size=0.04):
 def column(rng, polys, q, gap=2e-4, jitter=0.004):
     """Centroid positions stacking the bodies in a column, each lowest vertex ``gap`` above the
     previous body's highest vertex (the first above z = 0)."""
-    from demcli.engine.poly_system import polyhedra_groups
+    from demcli.engine.poly_shape import polyhedra_groups
 
     g = polyhedra_groups(polys, 1.0, q=q)
     sh = g["polyhedron_shapes"]
@@ -48,12 +48,12 @@ def column(rng, polys, q, gap=2e-4, jitter=0.004):
 def worst_depth(s):
     """Largest overlap depth / bounding radius over the pair and wall contacts now."""
     nl = s.nl
-    act = nl[P_ACT].astype(bool)
+    act = nl.act.astype(bool)
     d = 0.0
     if act.any():
-        d = float((nl[P_GEO][act, 0] / np.minimum(s.rad[nl[P_PI][act]], s.rad[nl[P_PJ][act]])).max())
-    if len(nl[P_WGEO]):
-        d = max(d, float((nl[P_WGEO][:, 0] / s.rad[nl[P_WBODY]]).max()))
+        d = float((nl.geo[act, 0] / np.minimum(s.rad[nl.pi[act]], s.rad[nl.pj[act]])).max())
+    if len(nl.wgeo):
+        d = max(d, float((nl.wgeo[:, 0] / s.rad[nl.wprim]).max()))
     return d
 
 
@@ -63,7 +63,7 @@ def worst_depth(s):
 def test_very_stiff_polyhedra_with_the_automatic_step(scene):
     # Given: a column of 3 random 40 mm stones (12 under stress) 0.2 mm apart above a floor in an
     # open box, E = 4e11 Pa, mu 0.67, restitution 0.3 (normal dashpot), local damping 0.4: the
-    # ballast cases' physics at the seed's stiffness, dt = 0.3 x PolySystem.critical_dt (the
+    # ballast cases' physics at the seed's stiffness, dt = 0.3 x PolyShape.critical_dt (the
     # ballast cases' factor; 2.4e-7 s)
     rng = np.random.default_rng(5)
     n = 12 if scene.STRESS else 3
@@ -114,7 +114,7 @@ def _drop_on_floor(scene, poly, q, v, omega, young, dt_factor):
     for _ in range(200000):
         status, _ = s.advance(1)
         assert status == K.OK, K.STATUS_TEXT[status]
-        wgeo = s.nl[P_WGEO]
+        wgeo = s.nl.wgeo
         d = float(wgeo[:, 0].max()) if len(wgeo) else 0.0
         inside += d > 0.0
         depth = max(depth, d / rc)

@@ -52,9 +52,9 @@ def test_big_sphere_on_three_small_ones_carries_its_weight_through_them(scene):
     # part: delta = (3 F_n / (4 E* sqrt(R*)))^(2/3), R* = R r / (R + r)
     assert status == K.OK
     nl = s.nl
-    act = nl[K.NL_ACT].astype(bool)
-    assert sorted(zip(nl[K.NL_PI][act].tolist(), nl[K.NL_PJ][act].tolist())) == [(0, 3), (1, 3), (2, 3)]
-    f = nl[K.NL_FC][act]  # on the small sphere i
+    act = nl.act.astype(bool)
+    assert sorted(zip(nl.pi[act].tolist(), nl.pj[act].tolist())) == [(0, 3), (1, 3), (2, 3)]
+    f = nl.fc[act]  # on the small sphere i
     n = s.x[:3] - s.x[3]
     dist = np.linalg.norm(n, axis=1)
     n /= dist[:, None]

@@ -2,7 +2,7 @@
 
 The geometry kernel's degenerate cases (coplanar faces, parallel edges, vertex on a face)
 are tested in tests/kernels/test_polyhedra_contact.py; here they are driven through the
-polyhedral engine (PolySystem) with gravity, friction and damping, or head-on without
+engine (System with polyhedra) with gravity, friction and damping, or head-on without
 them, and checked against statics and 1D impact references. Plates are 40 x 40 x 2 mm,
 slivers 40 x 2 x 2 mm, E = 1e9 Pa unless stated.
 """
@@ -14,8 +14,6 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from demcli.kernels import layout as K
-from demcli.kernels.poly_step import P_ACT, P_GEO, P_WGEO
-
 G = 9.81
 T, L = 0.002, 0.04
 
@@ -62,8 +60,8 @@ def test_stacked_plates_and_slivers_carry_their_weight(scene):
         assert np.hypot(*c["force"][k, :2]) < 1e-6 * above
     assert -s.wforce[0, 2] == pytest.approx(s.mass.sum() * G, rel=1e-6)
     assert np.abs(s.v).max() < 1e-6 and np.abs(s.w[:, :2]).max() < 1e-4 and np.abs(s.w[:, 2]).max() < 1e-2
-    act = s.nl[P_ACT].astype(bool)
-    assert s.nl[P_GEO][act, 0].max() < 1e-3 * T and s.nl[P_WGEO][:, 0].max() < 1e-3 * T
+    act = s.nl.act.astype(bool)
+    assert s.nl.geo[act, 0].max() < 1e-3 * T and s.nl.wgeo[:, 0].max() < 1e-3 * T
 
 
 # ---------------------------------------------------------------------------------------------
@@ -95,9 +93,9 @@ def _pour(scene, n, seed, dt_factor, t_end=1.0):
     while s.time < t_end and quiet < 5:
         status, _ = s.advance(int(0.01 / s.dt))
         assert status == K.OK, K.STATUS_TEXT[status]
-        act = s.nl[P_ACT].astype(bool)
-        depth = max(depth, float(s.nl[P_GEO][act, 0].max()) if act.any() else 0.0,
-                    float(s.nl[P_WGEO][:, 0].max()) if len(s.nl[P_WGEO]) else 0.0)
+        act = s.nl.act.astype(bool)
+        depth = max(depth, float(s.nl.geo[act, 0].max()) if act.any() else 0.0,
+                    float(s.nl.wgeo[:, 0].max()) if len(s.nl.wgeo) else 0.0)
         quiet = quiet + 1 if s.time > 0.2 and s.kinetic_energy() / n < 1e-4 * mgt else 0
     return s, e0, depth / T
 

@@ -204,7 +204,7 @@ def test_cycle_timing_gives_whole_cycles_of_whole_records():
 
 
 def test_bed_measures_and_surface_height_of_a_known_layer():
-    from demcli.engine.poly_system import polyhedra_groups
+    from demcli.engine.poly_shape import polyhedra_groups
     from demcli.stages.ballast.box import bed_measures, surface_height
     from test_polyhedra_dynamics import box
 
@@ -358,7 +358,7 @@ def test_compare_keeps_the_curves_of_runs_whose_folders_are_gone(chain, tmp_path
 def test_interrupted_sleeper_stage_resumes_bit_identically(chain, tmp_path, h5_differences, interrupt_and_resume):
     import shutil
 
-    from demcli.engine.poly_system import PolySystem
+    from demcli.engine.system import System
 
     # Given: the smoke chain up to the vibrated bed, and its sleeper stage interrupted (Ctrl-C)
     # during the load cycle (shoulders filled, sleeper and shoulder particles moving); when it
@@ -366,6 +366,6 @@ def test_interrupted_sleeper_stage_resumes_bit_identically(chain, tmp_path, h5_d
     for f in chain.iterdir():
         if f.name[:2] in ("00", "01", "02", "03", "04"):
             shutil.copy(f, tmp_path / f.name)
-    interrupt_and_resume(PolySystem, 12000, SMOKE, tmp_path, "05-sleeper.ckpt.h5")
+    interrupt_and_resume(System, 12000, SMOKE, tmp_path, "05-sleeper.ckpt.h5")
     # Then: the sleeper state equals the uninterrupted run's, dataset for dataset
     assert h5_differences(chain / "05-sleeper.h5", tmp_path / "05-sleeper.h5") == []

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from demcli import run_case
-from demcli.engine.poly_system import polyhedra_groups
+from demcli.engine.poly_shape import polyhedra_groups
 from demcli.geometry import convex_hull
 from demcli.stages.ballast.clumps import clump_groups
 from demcli.state import State, read_state

@@ -35,9 +35,9 @@ def test_assembled_ballast_falls_into_its_box(tmp_path):
 def test_polyhedral_stage_resumes_bit_identically(tmp_path, monkeypatch):
     # Given a reference run and a run interrupted in the deposit stage
     run_case(CASE, out=tmp_path / "ref", quiet=True)
-    from demcli.engine import poly_system
+    from demcli.engine import system
 
-    real = poly_system.PolySystem.advance
+    real = system.System.advance
     calls = {"n": 0}
 
     def interrupted(self, n):
@@ -46,10 +46,10 @@ def test_polyhedral_stage_resumes_bit_identically(tmp_path, monkeypatch):
             raise KeyboardInterrupt
         return real(self, n)
 
-    monkeypatch.setattr(poly_system.PolySystem, "advance", interrupted)
+    monkeypatch.setattr(system.System, "advance", interrupted)
     with pytest.raises(StageError, match="interrupted"):
         run_case(CASE, out=tmp_path / "run", quiet=True)
-    monkeypatch.setattr(poly_system.PolySystem, "advance", real)
+    monkeypatch.setattr(system.System, "advance", real)
     run_case(CASE, out=tmp_path / "run", quiet=True, resume=True)
     # Then the resumed result equals the uninterrupted one
     a = read_state(tmp_path / "ref" / "03-deposit.h5")

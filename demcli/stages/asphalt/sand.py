@@ -159,11 +159,9 @@ def specimen_walls(case, radius, height, base, material, cylinder=True):
 
 def _unbalanced(system):
     """Mean unbalanced force over mean contact force (inf without contacts)."""
-    from demcli.kernels import layout as K
-
     nl = system.nl
-    fc = nl[K.NL_FC][nl[K.NL_ACT].astype(bool)]
-    wfc = nl[K.NL_WFC][:, :3]
+    fc = nl.fc[nl.act.astype(bool)]
+    wfc = nl.wfc[:, :3]
     forces = np.concatenate([np.linalg.norm(fc, axis=1), np.linalg.norm(wfc, axis=1)])
     forces = forces[forces > 0]
     if len(forces) == 0:
@@ -251,8 +249,8 @@ def run_prepare(ctx, cfg, state_in):
     p, _, _ = record("equilibrium", cycle(eq.max_steps))
     ctx.log(f"{n} spheres of {r * 1e3:.4g} mm packed: isotropic stress {p:.4g} Pa")
     while p > cfg.isotropic_stress:
-        act = system.nl[K.NL_ACT].astype(bool)
-        pi, pj = system.nl[K.NL_PI][act], system.nl[K.NL_PJ][act]
+        act = system.nl.act.astype(bool)
+        pi, pj = system.nl.pi[act], system.nl.pj[act]
         overlap = float(np.mean(system.rad[pi] + system.rad[pj] - np.linalg.norm(system.xs[pi] - system.xs[pj],
                                                                                   axis=1))) if act.any() else 0.0
         # linear contacts: the stress follows the mean overlap; each cut removes 80 % of the overlap

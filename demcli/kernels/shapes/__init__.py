@@ -1,0 +1,115 @@
+"""Shape plug-ins of the body engine, chosen at compile time by the type of the geometry tuple.
+
+A shape module defines a named tuple class for its geometry arrays and the hooks below as
+numba (``njit``) functions; :func:`register` maps the class to the module. The engine
+(:mod:`demcli.kernels.engine`) calls the stubs here; numba specialises the engine for each
+geometry type and inlines the registered shape's hook (``numba.extending.overload``), so a
+scene compiles only its own shape's passes and pays no dispatch at run time. A hook that
+writes arrays it takes from a tuple must not be inlined into a parallel loop: numba 0.68 loses
+such writes (the engine calls ``wall_contact`` from the gather's prange as a plain call).
+
+Hooks (g: the geometry tuple, bd: Bodies, nl: Contacts, wa: WallArrays; see
+:mod:`demcli.kernels.layout`):
+
+* ``place(g, bd, flags, xref, lim2, rebuild)``: bring the primitives to the bodies' new pose
+  (clump members, polyhedron world vertices), flag a list rebuild if one moved > skin/2;
+* ``volumetric(g)``: whether contacts keep a depth and a separation cache (geo, sep, sdir) and
+  normal forces turn the bodies (polyhedra);
+* ``primitives(g, bd)``: (positions, radii, body of each) of the spheres the Verlet lists
+  are built on (the spheres themselves, or bounding spheres);
+* ``pair_pass(g, bd, nl, prm, law, flags, dt, frow, trow, erow, bonds, bprm, broke)``: the force
+  of every listed pair into its own row, the row owner's sums into frow/trow/erow;
+* ``wall_contact(g, bd, i, k, wa, nl, prm, law, flags, dt)``: primitive i on wall contact k,
+  returns (fx, fy, fz, tx, ty, tz, dashpot loss, slip loss) and writes nl.wfc[k];
+* ``worst_overlap(g, nl, wa)``: (ratio, i, j) for the guard.
+"""
+
+from numba.extending import overload
+
+from demcli.kernels.shapes import polyhedra, spheres
+
+SHAPES = {}
+
+
+def register(geometry_class, module):
+    """Make ``module``'s hooks the implementation for geometry tuples of ``geometry_class``."""
+    SHAPES[geometry_class] = module
+
+
+register(spheres.SphereGeometry, spheres)
+register(polyhedra.PolyGeometry, polyhedra)
+
+
+def _hook(g, name):
+    """The registered shape's hook ``name`` for the numba type ``g`` of a geometry tuple."""
+    cls = getattr(g, "instance_class", None)
+    if cls not in SHAPES:
+        raise TypeError(f"no shape plug-in registered for {g}")
+    return getattr(SHAPES[cls], name)
+
+
+def place(g, bd, flags, xref, lim2, rebuild):
+    """The shape's ``place`` (plain Python: with NUMBA_DISABLE_JIT=1)."""
+    return getattr(SHAPES[type(g)], "place")(g, bd, flags, xref, lim2, rebuild)
+
+
+def volumetric(g):
+    """The shape's ``volumetric`` (plain Python: with NUMBA_DISABLE_JIT=1)."""
+    return getattr(SHAPES[type(g)], "volumetric")(g)
+
+
+def primitives(g, bd):
+    """The shape's ``primitives`` (plain Python: with NUMBA_DISABLE_JIT=1)."""
+    return getattr(SHAPES[type(g)], "primitives")(g, bd)
+
+
+def pair_pass(g, bd, nl, prm, law, flags, dt, frow, trow, erow, bonds, bprm, broke):
+    """The shape's ``pair_pass`` (plain Python: with NUMBA_DISABLE_JIT=1)."""
+    return getattr(SHAPES[type(g)], "pair_pass")(g, bd, nl, prm, law, flags, dt, frow, trow, erow, bonds, bprm, broke)
+
+
+def wall_contact(g, bd, i, k, wa, nl, prm, law, flags, dt):
+    """The shape's ``wall_contact`` (plain Python: with NUMBA_DISABLE_JIT=1)."""
+    return getattr(SHAPES[type(g)], "wall_contact")(g, bd, i, k, wa, nl, prm, law, flags, dt)
+
+
+def worst_overlap(g, nl, wa):
+    """The shape's ``worst_overlap`` (plain Python: with NUMBA_DISABLE_JIT=1)."""
+    return getattr(SHAPES[type(g)], "worst_overlap")(g, nl, wa)
+
+
+@overload(place)
+def _place(g, bd, flags, xref, lim2, rebuild):
+    fn = _hook(g, "place")
+    return lambda g, bd, flags, xref, lim2, rebuild: fn(g, bd, flags, xref, lim2, rebuild)
+
+
+@overload(volumetric, inline="always")
+def _volumetric(g):
+    fn = _hook(g, "volumetric")
+    return lambda g: fn(g)
+
+
+@overload(primitives)
+def _primitives(g, bd):
+    fn = _hook(g, "primitives")
+    return lambda g, bd: fn(g, bd)
+
+
+@overload(pair_pass)
+def _pair_pass(g, bd, nl, prm, law, flags, dt, frow, trow, erow, bonds, bprm, broke):
+    fn = _hook(g, "pair_pass")
+    return lambda g, bd, nl, prm, law, flags, dt, frow, trow, erow, bonds, bprm, broke: fn(
+        g, bd, nl, prm, law, flags, dt, frow, trow, erow, bonds, bprm, broke)
+
+
+@overload(wall_contact)
+def _wall_contact(g, bd, i, k, wa, nl, prm, law, flags, dt):
+    fn = _hook(g, "wall_contact")
+    return lambda g, bd, i, k, wa, nl, prm, law, flags, dt: fn(g, bd, i, k, wa, nl, prm, law, flags, dt)
+
+
+@overload(worst_overlap)
+def _worst_overlap(g, nl, wa):
+    fn = _hook(g, "worst_overlap")
+    return lambda g, nl, wa: fn(g, nl, wa)

@@ -1,0 +1,501 @@
+"""Shape plug-in: rigid convex polyhedra (seed 002, Shao, Lian & Yang 2017, sec. 3).
+
+Contact law (seed eqs. 17-19, Shao, Lian & Yang 2017), for the intersection I of the two
+bodies with volume V, contact area A_c = |S| and normal n = S/|S|
+(:func:`demcli.kernels.polyhedra.contact_frame`), depth d = V / A_c, contact point the
+centroid g of I:
+
+* normal: F_N = k_n sqrt(V d), k_n = 4 E / (3 sqrt(pi)) [Pa], E = 2 E1 E2 / (E1 + E2).
+  For a flat face-face overlap V = A_c d, so F_N = k_n sqrt(A_c) d: the contact's
+  normal stiffness is K_n = k_n sqrt(A_c) [N/m].
+* optional normal dashpot: c_n = 2 zeta sqrt(m* K_n), zeta from the restitution
+  coefficient, on the normal relative velocity at g; the normal force is clamped at
+  zero (no cohesion), which only removes energy.
+* tangential: incremental spring dF_s = -K_t v_t dt, history turned into the current
+  tangent plane (``_to_tangent_plane``), K_t = k_s sqrt(A_c), k_s = 0.25 k_n. The
+  paper prints dF_s = k_s du_s A, which is not a force (Pa m m^2 = N m); with
+  V ~ A d the normal law's stiffness is k_n sqrt(A), so K_t = k_s sqrt(A) keeps
+  k_s / k_n = 0.25 as the ratio of tangential to normal contact stiffness.
+* Coulomb slip: |F_s| <= mu F_N (the stored spring is scaled back to the limit).
+
+The pair pass: prange over CSR rows i, the exact overlap (``overlap_ws``) of each listed
+pair whose bounding spheres meet, unless a cached separating face or direction (``sep``,
+``sdir``) still clears it by a margin, one force per pair into its own row; the row owner sums
+i's side (race-free). Plane walls: the overlap of the body with the solid half-space
+n_in . x <= n_in . p (``plane_overlap``). Actors (bodies nsmall..) stay out of the cell grid and
+are paired with every body near them (:func:`add_actor_pairs`).
+
+Provides the engine's hooks (:mod:`demcli.kernels.shapes`): ``place`` (world vertices and face
+planes), ``primitives`` (bounding spheres on the centroids), ``pair_pass``, ``wall_contact``,
+``worst_overlap`` (depth / bounding radius).
+"""
+
+import math
+from collections import namedtuple
+
+import numpy as np
+from numba import prange
+
+from demcli.jit import njit
+from demcli.kernels.contact import _to_tangent_plane
+from demcli.kernels.layout import F_DASHPOT, F_ENERGY, F_FRICTION
+from demcli.kernels.polyhedra import (contact_frame, max_row, overlap_ws, plane_overlap, scratch,
+                                      to_world_planes, to_world_vertices)
+from demcli.kernels.separation import gap, separating_direction
+
+PolyGeometry = namedtuple("PolyGeometry", "rad mat shape vertex_start vertices face_start fvstart fverts "
+                                          "face_normal face_offset bvstart bfstart wvert wnorm woff")
+"""Polyhedra: rad (n_b,) bounding radius about the centroid [m]; mat (n_b,) material; shape (n_b,)
+template of each body; vertex_start .. face_offset: the polyhedron_shapes CSR tables (body frame);
+bvstart, bfstart (n_b + 1,) each body's rows of the world arrays wvert (n_v, 3), wnorm (n_f, 3),
+woff (n_f,) (scratch, rewritten every step)."""
+
+# columns of the material-pair table prm[a, b, :]
+Q_KN = 0      # k_n = 4 E / (3 sqrt(pi)) [Pa]
+Q_MU = 1      # Coulomb friction coefficient [-]
+Q_ZETA = 2    # damping ratio of the optional normal dashpot [-]
+N_QPARAMS = 3
+
+# sep[c] (int32), why pair c does not touch: 0 unknown (or touching), k + 1 face k of body i,
+# -(k + 1) face k of body j (its plane clears the other body), SEP_DIR the unit direction
+# sdir[c] (float64 (3,), from i to j) separates them (demcli.kernels.separation; pairs
+# separated only across two edges), SEP_NONE none found (overlap() every step)
+SEP_NONE = -(2 ** 30)
+SEP_DIR = SEP_NONE + 1
+SEP_ITER = 32  # GJK iterations allowed when searching a separating direction
+SEP_MARGIN = 1e-9  # a cached face or direction must clear by this x (r_i + r_j) + 1e-12 max |x|
+# columns of geo / wgeo (per contact, last evaluation): depth d [m], elastic normal force F_N [N],
+# tangential stiffness K_t [N/m]
+G_DEPTH, G_FN, G_KT = 0, 1, 2
+
+
+
+@njit(inline="always")
+def _volumetric_law(prm, ma, mb, vol, depth, area, nx, ny, nz, vx, vy, vz, mstar, dt, ft, k, friction, dashpot):
+    """Force on A of one contact (seed eqs. 17-19; see the module docstring).
+
+    Args:
+        prm: (n_m, n_m, N_QPARAMS) material-pair table; ma, mb: the pair's materials (indices:
+        a row view costs two atomic reference-count updates per contact). vol [m^3],
+        depth [m], area [m^2]: overlap volume, depth V/A_c and contact area. n: unit normal from B into A. v: velocity
+        of A's material point at the contact point relative to B's [m/s]. mstar [kg].
+        dt: step [s] (0 for the priming evaluation: no history increment).
+        ft: (n, 3) tangential springs [N], row k updated in place.
+
+    Returns:
+        (fx, fy, fz, e_damp, e_fric, F_N elastic, K_n (+ c_n/dt for the servo), K_t).
+    """
+    kn = prm[ma, mb, Q_KN]
+    sq = math.sqrt(area)
+    knc = kn * sq                      # contact normal stiffness k_n sqrt(A_c) [N/m]
+    fel = kn * math.sqrt(vol * depth)  # eq. 17
+    vn = vx * nx + vy * ny + vz * nz
+    fn = fel
+    e_damp = 0.0
+    kserv = knc
+    if dashpot:
+        cn = 2.0 * prm[ma, mb, Q_ZETA] * math.sqrt(mstar * knc)
+        fn = fel - cn * vn
+        if fn < 0.0:
+            fn = 0.0
+        e_damp = (fel - fn) * vn * dt  # >= 0: cn vn^2 dt, or fel vn dt when clamped (vn > 0)
+        if dt > 0.0:
+            kserv += cn / dt
+    fx = fn * nx
+    fy = fn * ny
+    fz = fn * nz
+    e_fric = 0.0
+    kt = 0.25 * knc                    # k_s sqrt(A_c), k_s = 0.25 k_n (eq. 19 made dimensionally sound)
+    if friction:
+        vtx = vx - vn * nx
+        vty = vy - vn * ny
+        vtz = vz - vn * nz
+        hx, hy, hz = _to_tangent_plane(ft[k, 0], ft[k, 1], ft[k, 2], nx, ny, nz)
+        hx -= kt * vtx * dt
+        hy -= kt * vty * dt
+        hz -= kt * vtz * dt
+        lim = prm[ma, mb, Q_MU] * fn
+        hm2 = hx * hx + hy * hy + hz * hz
+        if hm2 > lim * lim:
+            hm = math.sqrt(hm2)
+            s = lim / hm
+            e_fric = (hm - lim) * lim / kt if kt > 0.0 else 0.0
+            hx *= s
+            hy *= s
+            hz *= s
+        ft[k, 0] = hx
+        ft[k, 1] = hy
+        ft[k, 2] = hz
+        fx += hx
+        fy += hy
+        fz += hz
+    return fx, fy, fz, e_damp, e_fric, fel, kserv, kt
+
+
+@njit(parallel=True)
+def _world_geometry(x, q, shape, vertex_start, vertices, face_start, face_normal, face_offset,
+                    bvstart, bfstart, wvert, wnorm, woff):
+    """World vertices and face planes of every body (rows bvstart / bfstart)."""
+    for b in prange(x.shape[0]):
+        k = shape[b]
+        to_world_vertices(vertices[vertex_start[k]:vertex_start[k + 1]], x[b], q[b],
+                          wvert[bvstart[b]:bvstart[b + 1]])
+        f0 = face_start[k]
+        f1 = face_start[k + 1]
+        to_world_planes(face_normal[f0:f1], face_offset[f0:f1], x[b], q[b],
+                        wnorm[bfstart[b]:bfstart[b + 1]], woff[bfstart[b]:bfstart[b + 1]])
+
+
+@njit(inline="always")
+def _clearance(n, d, verts):
+    """min over ``verts`` of n_f . v - d_f for every face f of (n, d): the largest is the
+    widest gap a face plane of one body leaves to the other body; returns (gap, face)."""
+    best = -math.inf
+    bf = -1
+    for f in range(n.shape[0]):
+        g = math.inf
+        for k in range(verts.shape[0]):
+            t = n[f, 0] * verts[k, 0] + n[f, 1] * verts[k, 1] + n[f, 2] * verts[k, 2] - d[f]
+            if t < g:
+                g = t
+                if g <= best:
+                    break
+        if g > best:
+            best = g
+            bf = f
+    return best, bf
+
+
+@njit(inline="always")
+def _still_separated(code, na, da, va, nb_, db_, vb, margin):
+    """Whether the cached face ``code`` (see ``sep`` in the constants above) still clears the other body by ``margin``."""
+    if code > 0:
+        f = code - 1
+        n = na
+        d = da
+        verts = vb
+    else:
+        f = -code - 1
+        n = nb_
+        d = db_
+        verts = va
+    for k in range(verts.shape[0]):
+        if n[f, 0] * verts[k, 0] + n[f, 1] * verts[k, 1] + n[f, 2] * verts[k, 2] - d[f] <= margin:
+            return False
+    return True
+
+
+@njit(parallel=True)
+def _pair_forces(start, pj, x, v, w, mass, rad, bmat, prm, sw, dt,
+                 shape, vertex_start, face_start, fvstart, fverts, bvstart, bfstart, wvert, wnorm, woff,
+                 ft, fc, tj, act, epair, geo, frow, trow, erow, sep, sdir):
+    """Force of every listed pair into its own row; the row owner i sums its side.
+
+    fc[c]: force on i [N]; tj[c]: torque on j [N m]; geo[c]: (depth, F_N, K_t);
+    epair[c]: (dashpot, slip) losses this step [J]; frow/trow/erow[i]: i's sums.
+    sep[c], sdir[c]: the cached separating face or direction (SEP_* codes above): a pair still cleared by
+    it skips the exact overlap, which would find V = 0 (the results do not depend on the
+    cache). A direction that no longer clears is searched again from where it was.
+    """
+    friction = sw[F_FRICTION]
+    energy = sw[F_ENERGY]
+    dashpot = sw[F_DASHPOT]
+    # scratch of overlap_ws for any pair of these shapes: largest face, most faces
+    max_fv = max_row(fvstart)
+    max_f = max_row(face_start)
+    for i in prange(start.shape[0] - 1):
+        sfx = 0.0
+        sfy = 0.0
+        sfz = 0.0
+        stx = 0.0
+        sty = 0.0
+        stz = 0.0
+        se0 = 0.0
+        se1 = 0.0
+        c0 = start[i]
+        c1 = start[i + 1]
+        if c1 > c0:
+            buf, fw, planes = scratch(max_fv, max_f)  # once per row, not per pair
+            xi0 = x[i, 0]
+            xi1 = x[i, 1]
+            xi2 = x[i, 2]
+            ri = rad[i]
+            ki = shape[i]
+            va = wvert[bvstart[i]:bvstart[i + 1]]
+            na = wnorm[bfstart[i]:bfstart[i + 1]]
+            da = woff[bfstart[i]:bfstart[i + 1]]
+            fsa = fvstart[face_start[ki]:face_start[ki + 1] + 1]
+            offa = vertex_start[ki]
+            mi = mass[i]
+            for c in range(c0, c1):
+                j = pj[c]
+                xj0 = x[j, 0]
+                xj1 = x[j, 1]
+                xj2 = x[j, 2]
+                dx = xi0 - xj0
+                dy = xi1 - xj1
+                dz = xi2 - xj2
+                rj = rad[j]
+                rs = ri + rj
+                vol = 0.0
+                gx = gy = gz = sx = sy = sz = 0.0
+                if dx * dx + dy * dy + dz * dz < rs * rs:
+                    kj = shape[j]
+                    vb = wvert[bvstart[j]:bvstart[j + 1]]
+                    nb_ = wnorm[bfstart[j]:bfstart[j + 1]]
+                    db_ = woff[bfstart[j]:bfstart[j + 1]]
+                    code = sep[c]
+                    margin = SEP_MARGIN * rs + 1e-12 * max(abs(xi0), abs(xi1), abs(xi2), abs(xj0), abs(xj1),
+                                                          abs(xj2))
+                    if code == SEP_DIR:
+                        apart = gap(sdir[c, 0], sdir[c, 1], sdir[c, 2], va, vb) > margin
+                        if not apart:
+                            apart, ux, uy, uz = separating_direction(va, vb, sdir[c, 0], sdir[c, 1], sdir[c, 2],
+                                                                     margin, SEP_ITER, buf)
+                            if apart:
+                                sdir[c, 0] = ux
+                                sdir[c, 1] = uy
+                                sdir[c, 2] = uz
+                    else:
+                        apart = code != 0 and code != SEP_NONE and _still_separated(code, na, da, va, nb_, db_, vb,
+                                                                                    margin)
+                    if apart:
+                        vol = 0.0
+                    else:
+                        vol, gx, gy, gz, sx, sy, sz = overlap_ws(
+                            va, fsa, fverts, offa, na, da, xi0, xi1, xi2, ri,
+                            vb, fvstart[face_start[kj]:face_start[kj + 1] + 1], fverts,
+                            vertex_start[kj], nb_, db_, xj0, xj1, xj2, rj, buf, fw, planes)
+                        if not vol > 0.0 and code != SEP_NONE:
+                            ga, fa = _clearance(na, da, vb)
+                            gb, fb = _clearance(nb_, db_, va)
+                            if ga > margin and ga >= gb:
+                                sep[c] = fa + 1
+                            elif gb > margin:
+                                sep[c] = -(fb + 1)
+                            else:
+                                found, ux, uy, uz = separating_direction(va, vb, -dx, -dy, -dz, margin, SEP_ITER,
+                                                                         buf)
+                                if found:
+                                    sep[c] = SEP_DIR
+                                    sdir[c, 0] = ux
+                                    sdir[c, 1] = uy
+                                    sdir[c, 2] = uz
+                                else:
+                                    sep[c] = SEP_NONE
+                        elif vol > 0.0:
+                            sep[c] = 0
+                if not vol > 0.0:
+                    if act[c]:
+                        act[c] = 0
+                        geo[c, 0] = 0.0
+                        geo[c, 1] = 0.0
+                        geo[c, 2] = 0.0
+                        fc[c, 0] = 0.0
+                        fc[c, 1] = 0.0
+                        fc[c, 2] = 0.0
+                    if friction:  # the contact opened (or a carried one never closed): history dropped
+                        ft[c, 0] = 0.0
+                        ft[c, 1] = 0.0
+                        ft[c, 2] = 0.0
+                    continue
+                act[c] = 1
+                nx, ny, nz, area, depth = contact_frame(vol, sx, sy, sz, xi0, xi1, xi2, xj0, xj1, xj2, ri, rj)
+                # branches from the centroids to the contact point, and its relative velocity
+                aix = gx - xi0
+                aiy = gy - xi1
+                aiz = gz - xi2
+                ajx = gx - xj0
+                ajy = gy - xj1
+                ajz = gz - xj2
+                vx = (v[i, 0] + w[i, 1] * aiz - w[i, 2] * aiy) - (v[j, 0] + w[j, 1] * ajz - w[j, 2] * ajy)
+                vy = (v[i, 1] + w[i, 2] * aix - w[i, 0] * aiz) - (v[j, 1] + w[j, 2] * ajx - w[j, 0] * ajz)
+                vz = (v[i, 2] + w[i, 0] * aiy - w[i, 1] * aix) - (v[j, 2] + w[j, 0] * ajy - w[j, 1] * ajx)
+                mj = mass[j]
+                fx, fy, fz, ed, ef, fel, _, kt = _volumetric_law(
+                    prm, bmat[i], bmat[j], vol, depth, area, nx, ny, nz, vx, vy, vz, mi * mj / (mi + mj), dt,
+                    ft, c, friction, dashpot)
+                fc[c, 0] = fx
+                fc[c, 1] = fy
+                fc[c, 2] = fz
+                geo[c, 0] = depth
+                geo[c, 1] = fel
+                geo[c, 2] = kt
+                sfx += fx
+                sfy += fy
+                sfz += fz
+                stx += aiy * fz - aiz * fy
+                sty += aiz * fx - aix * fz
+                stz += aix * fy - aiy * fx
+                tj[c, 0] = -(ajy * fz - ajz * fy)
+                tj[c, 1] = -(ajz * fx - ajx * fz)
+                tj[c, 2] = -(ajx * fy - ajy * fx)
+                if energy:
+                    epair[c, 0] = ed
+                    epair[c, 1] = ef
+                    se0 += ed
+                    se1 += ef
+        frow[i, 0] = sfx
+        frow[i, 1] = sfy
+        frow[i, 2] = sfz
+        trow[i, 0] = stx
+        trow[i, 1] = sty
+        trow[i, 2] = stz
+        if energy:
+            erow[i, 0] = se0
+            erow[i, 1] = se1
+
+
+@njit
+def place(g, bd, flags, xref, lim2, rebuild):
+    """World vertices and face planes of every body."""
+    _world_geometry(bd.x, bd.q, g.shape, g.vertex_start, g.vertices, g.face_start, g.face_normal, g.face_offset,
+                    g.bvstart, g.bfstart, g.wvert, g.wnorm, g.woff)
+
+
+@njit(inline="always")
+def volumetric(g):
+    """Contacts keep a depth (geo) and a separation cache (sep, sdir); normal forces turn bodies."""
+    return True
+
+
+@njit
+def primitives(g, bd):
+    """Bounding spheres centred on the centroids (rotation does not move them)."""
+    return bd.x, g.rad, np.arange(bd.x.shape[0])
+
+
+@njit
+def pair_pass(g, bd, nl, prm, law, flags, dt, frow, trow, erow, bonds, bprm, broke):
+    """Every listed pair's force into its own row (bonds do not join polyhedra)."""
+    _pair_forces(nl.start, nl.pj, bd.x, bd.v, bd.w, bd.mass, g.rad, g.mat, prm, flags, dt,
+                 g.shape, g.vertex_start, g.face_start, g.fvstart, g.fverts, g.bvstart, g.bfstart, g.wvert, g.wnorm,
+                 g.woff, nl.ft, nl.fc, nl.tj, nl.act, nl.epair, nl.geo, frow, trow, erow, nl.sep, nl.sdir)
+
+
+@njit
+def wall_contact(g, bd, b, k, wa, nl, prm, law, flags, dt):
+    """Body b against plane-wall contact k: the overlap with the solid half-space, the
+    volumetric law; writes wfc[k] (force, servo stiffness) and wgeo[k]; returns (force,
+    torque about the centroid, dashpot loss, slip loss) on the body."""
+    friction = flags[F_FRICTION]
+    dashpot = flags[F_DASHPOT]
+    x = bd.x
+    v = bd.v
+    w = bd.w
+    wfc = nl.wfc
+    wgeo = nl.wgeo
+    wft = nl.wft
+    wnormal = wa.normal
+    wpoint = wa.point
+    wv = wa.v
+    kb = g.shape[b]
+    rb = g.rad[b]
+    va = g.wvert[g.bvstart[b]:g.bvstart[b + 1]]
+    na = g.wnorm[g.bfstart[b]:g.bfstart[b + 1]]
+    da = g.woff[g.bfstart[b]:g.bfstart[b + 1]]
+    fsa = g.fvstart[g.face_start[kb]:g.face_start[kb + 1] + 1]
+    offa = g.vertex_start[kb]
+    fverts = g.fverts
+    xb0 = x[b, 0]
+    xb1 = x[b, 1]
+    xb2 = x[b, 2]
+    m = bd.mass[b]
+    wl = nl.wwall[k]
+    wnx = wnormal[wl, 0]
+    wny = wnormal[wl, 1]
+    wnz = wnormal[wl, 2]
+    vol = 0.0
+    gx = gy = gz = sx = sy = sz = 0.0
+    if wa.kind[wl] == 0:  # plane; the registry refuses other kinds for polyhedra
+        wd = wnx * wpoint[wl, 0] + wny * wpoint[wl, 1] + wnz * wpoint[wl, 2]
+        vol, gx, gy, gz, sx, sy, sz = plane_overlap(va, fsa, fverts, offa, na, da, xb0, xb1, xb2, rb,
+                                                    wnx, wny, wnz, wd)
+    if not vol > 0.0:
+        wfc[k, 0] = 0.0
+        wfc[k, 1] = 0.0
+        wfc[k, 2] = 0.0
+        wfc[k, 3] = 0.0
+        wgeo[k, 0] = 0.0
+        wgeo[k, 1] = 0.0
+        wgeo[k, 2] = 0.0
+        if friction:
+            wft[k, 0] = 0.0
+            wft[k, 1] = 0.0
+            wft[k, 2] = 0.0
+        return 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+    # B = the wall: its "centre" one unit behind the body along the wall normal, so the
+    # normal falls back to n_w if the cross-section vanishes (body wholly in the wall)
+    nx, ny, nz, area, depth = contact_frame(vol, sx, sy, sz, xb0, xb1, xb2, xb0 - wnx, xb1 - wny,
+                                            xb2 - wnz, rb, rb)
+    ax = gx - xb0
+    ay = gy - xb1
+    az = gz - xb2
+    vx = v[b, 0] + w[b, 1] * az - w[b, 2] * ay - wv[wl, 0]
+    vy = v[b, 1] + w[b, 2] * ax - w[b, 0] * az - wv[wl, 1]
+    vz = v[b, 2] + w[b, 0] * ay - w[b, 1] * ax - wv[wl, 2]
+    cfx, cfy, cfz, ed, ef, fel, kserv, kt = _volumetric_law(
+        prm, g.mat[b], wa.material[wl], vol, depth, area, nx, ny, nz, vx, vy, vz, m, dt, wft, k, friction,
+        dashpot)
+    wfc[k, 0] = cfx
+    wfc[k, 1] = cfy
+    wfc[k, 2] = cfz
+    wfc[k, 3] = kserv
+    wgeo[k, 0] = depth
+    wgeo[k, 1] = fel
+    wgeo[k, 2] = kt
+    return cfx, cfy, cfz, ay * cfz - az * cfy, az * cfx - ax * cfz, ax * cfy - ay * cfx, ed, ef
+
+
+@njit
+def worst_overlap(g, nl, wa):
+    """Largest depth / bounding radius over touching pairs and wall contacts; returns
+    (ratio, i, j) with j = -1 for a wall (i = -1 when nothing touches)."""
+    rad = g.rad
+    pi = nl.pi
+    pj = nl.pj
+    act = nl.act
+    geo = nl.geo
+    worst = 0.0
+    wi = -1
+    wj = -1
+    for c in range(pi.shape[0]):
+        if act[c]:
+            ratio = geo[c, G_DEPTH] / min(rad[pi[c]], rad[pj[c]])
+            if ratio > worst:
+                worst = ratio
+                wi = pi[c]
+                wj = pj[c]
+    for b in range(rad.shape[0]):
+        for k in range(nl.wstart[b], nl.wstart[b + 1]):
+            ratio = nl.wgeo[k, G_DEPTH] / rad[b]
+            if ratio > worst:
+                worst = ratio
+                wi = b
+                wj = -1
+    return worst, wi, wj
+
+
+@njit
+def strain_energy_estimate(act, geo, ft, wgeo, wft, friction):
+    """Elastic energy of the contacts [J], estimated (serial, fixed order).
+
+    The volumetric law F_N = k_n sqrt(V d) has no potential in general (a potential
+    U(V) would give a force U'(V) S, i.e. |F| proportional to the contact area
+    A_c at fixed V; here F_N = k_n V / sqrt(A_c)). For a flat face-face overlap of
+    constant area it is a linear spring of stiffness k_n sqrt(A_c), energy F_N d / 2;
+    that value is used for every contact, plus |F_s|^2 / (2 K_t) for the tangential
+    springs. Exact for face-face contacts, an estimate otherwise.
+    """
+    e = 0.0
+    for c in range(act.shape[0]):
+        if act[c]:
+            e += 0.5 * geo[c, G_FN] * geo[c, G_DEPTH]
+            if friction and geo[c, G_KT] > 0.0:
+                e += 0.5 * (ft[c, 0] ** 2 + ft[c, 1] ** 2 + ft[c, 2] ** 2) / geo[c, G_KT]
+    for k in range(wgeo.shape[0]):
+        if wgeo[k, G_DEPTH] > 0.0:
+            e += 0.5 * wgeo[k, G_FN] * wgeo[k, G_DEPTH]
+            if friction and wgeo[k, G_KT] > 0.0:
+                e += 0.5 * (wft[k, 0] ** 2 + wft[k, 1] ** 2 + wft[k, 2] ** 2) / wgeo[k, G_KT]
+    return e

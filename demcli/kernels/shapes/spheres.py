@@ -1,0 +1,301 @@
+"""Shape plug-in: spheres, and rigid clumps of spheres (the members are the collision primitives).
+
+Contact of two spheres (or a sphere and a wall) at overlap delta = r_i + r_j - |x_i - x_j|
+along n = (x_i - x_j) / |x_i - x_j|, contact point at the middle of the overlap; the laws
+(linear spring-dashpot or Hertz-Mindlin, Coulomb slip, rolling resistance) are in
+:mod:`demcli.kernels.contact`; bonds (contact, parallel, Burgers) in :mod:`demcli.kernels.bonds`.
+
+Provides the engine's hooks (:mod:`demcli.kernels.shapes`): ``place`` (clump members follow
+their body), ``primitives`` (the spheres the lists are built on), ``pair_pass`` (sphere pairs,
+then bonds), ``wall_contact`` (sphere-wall, planes and cylinders), ``worst_overlap`` (the guard).
+"""
+
+import math
+from collections import namedtuple
+
+from numba import prange
+
+from demcli.jit import njit
+from demcli.kernels import quat
+from demcli.kernels.bonds import bond_gather, bond_pass
+from demcli.kernels.contact import (HERTZ, P_CN, P_ESTAR, P_KN, P_ZETA, contact_law, pair_kinematics,
+                                   strain_energy)
+from demcli.kernels.layout import F_BONDS, F_CLUMPS, F_ENERGY, F_FRICTION, F_ROLLING
+from demcli.kernels.walls import wall_distance
+
+SphereGeometry = namedtuple("SphereGeometry", "xs vs ws rad mat smass sbody soff")
+"""Spheres: xs, vs, ws (n_s, 3) position, velocity and spin of each sphere (for spheres-only
+scenes the body arrays: sphere i is body i); rad (n_s,) m; mat (n_s,) material; smass (n_s,) mass
+of the sphere's body; sbody (n_s,) its body; soff (n_s, 3) offset in the body frame."""
+
+
+@njit(parallel=True)
+def _place_members(x, v, w, q, xs, vs, ws, sbody, soff, xref, lim2, rebuild):
+    """Clump members follow their body: position, velocity and spin of each sphere."""
+    for s in prange(xs.shape[0]):
+        b = sbody[s]
+        ox, oy, oz = quat.rotate(q[b, 0], q[b, 1], q[b, 2], q[b, 3], soff[s, 0], soff[s, 1], soff[s, 2])
+        xs[s, 0] = x[b, 0] + ox
+        xs[s, 1] = x[b, 1] + oy
+        xs[s, 2] = x[b, 2] + oz
+        vs[s, 0] = v[b, 0] + w[b, 1] * oz - w[b, 2] * oy
+        vs[s, 1] = v[b, 1] + w[b, 2] * ox - w[b, 0] * oz
+        vs[s, 2] = v[b, 2] + w[b, 0] * oy - w[b, 1] * ox
+        ws[s, 0] = w[b, 0]
+        ws[s, 1] = w[b, 1]
+        ws[s, 2] = w[b, 2]
+        dx = xs[s, 0] - xref[s, 0]
+        dy = xs[s, 1] - xref[s, 1]
+        dz = xs[s, 2] - xref[s, 2]
+        if dx * dx + dy * dy + dz * dz > lim2:
+            rebuild[0] = 1
+
+
+@njit(parallel=True)
+def _pair_forces(start, pj, xs, vs, ws, rad, smat, smass, prm, law, dt, ft, mr, friction, rolling,
+                 energy, fc, tj, act, epair, frow, trow, erow):
+    """Force, torques and dissipation of every listed pair, each pair writing its own row.
+
+    Walks the CSR rows (sphere i, then its j > i), so i's data is loaded once per row, and
+    the row's owner sums i's side of its pairs into frow/trow/erow[i] (race-free); the
+    gather then adds only the j sides.
+    """
+    for i in prange(start.shape[0] - 1):
+        xi0 = xs[i, 0]
+        xi1 = xs[i, 1]
+        xi2 = xs[i, 2]
+        ri = rad[i]
+        sfx = 0.0
+        sfy = 0.0
+        sfz = 0.0
+        stx = 0.0
+        sty = 0.0
+        stz = 0.0
+        se0 = 0.0
+        se1 = 0.0
+        for c in range(start[i], start[i + 1]):
+            j = pj[c]
+            dx = xi0 - xs[j, 0]
+            dy = xi1 - xs[j, 1]
+            dz = xi2 - xs[j, 2]
+            rj = rad[j]
+            rs = ri + rj
+            d2 = dx * dx + dy * dy + dz * dz
+            if d2 >= rs * rs:
+                if act[c]:  # a contact that just opened drops its history (most listed pairs never touch)
+                    act[c] = 0
+                    if friction:
+                        ft[c, 0] = 0.0
+                        ft[c, 1] = 0.0
+                        ft[c, 2] = 0.0
+                    if rolling:
+                        mr[c, 0] = 0.0
+                        mr[c, 1] = 0.0
+                        mr[c, 2] = 0.0
+                continue
+            act[c] = 1
+            d = math.sqrt(d2)
+            inv = 1.0 / d
+            nx = dx * inv
+            ny = dy * inv
+            nz = dz * inv
+            delta = rs - d
+            ai = ri - 0.5 * delta
+            aj = rj - 0.5 * delta
+            vx, vy, vz, wx, wy, wz = pair_kinematics(vs, ws, i, j, nx, ny, nz, ai, aj)
+            mi = smass[i]
+            mj = smass[j]
+            fx, fy, fz, mx, my, mz, ed, ef = contact_law(
+                law, prm, smat[i], smat[j], delta, nx, ny, nz, vx, vy, vz,
+                wx, wy, wz, ri * rj / rs, mi * mj / (mi + mj), dt,
+                ft, mr, c, friction, rolling)
+            fc[c, 0] = fx
+            fc[c, 1] = fy
+            fc[c, 2] = fz
+            sfx += fx
+            sfy += fy
+            sfz += fz
+            if friction or rolling:
+                # torque = (xc - x) x F, xc - xi = -ai n, xc - xj = aj n
+                cx = ny * fz - nz * fy
+                cy = nz * fx - nx * fz
+                cz = nx * fy - ny * fx
+                stx += -ai * cx + mx
+                sty += -ai * cy + my
+                stz += -ai * cz + mz
+                tj[c, 0] = -aj * cx - mx
+                tj[c, 1] = -aj * cy - my
+                tj[c, 2] = -aj * cz - mz
+            if energy:
+                epair[c, 0] = ed
+                epair[c, 1] = ef
+                se0 += ed
+                se1 += ef
+        frow[i, 0] = sfx
+        frow[i, 1] = sfy
+        frow[i, 2] = sfz
+        if friction or rolling:
+            trow[i, 0] = stx
+            trow[i, 1] = sty
+            trow[i, 2] = stz
+        if energy:
+            erow[i, 0] = se0
+            erow[i, 1] = se1
+
+
+@njit(inline="always")
+def _wall_contact(i, k, w, xs, vs, ws, rad, smat, smass, wkind, wpoint, wnormal, wradius, wv, wmat,
+                  prm, law, dt, wft, wmr, friction, rolling):
+    """Force and torque on sphere i from wall w (history row k); zero when apart."""
+    s, nx, ny, nz = wall_distance(wkind[w], wpoint[w, 0], wpoint[w, 1], wpoint[w, 2],
+                                  wnormal[w, 0], wnormal[w, 1], wnormal[w, 2], wradius[w],
+                                  xs[i, 0], xs[i, 1], xs[i, 2])
+    ri = rad[i]
+    delta = ri - s
+    if delta <= 0.0:
+        if friction:
+            wft[k, 0] = 0.0
+            wft[k, 1] = 0.0
+            wft[k, 2] = 0.0
+        if rolling:
+            wmr[k, 0] = 0.0
+            wmr[k, 1] = 0.0
+            wmr[k, 2] = 0.0
+        return 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+    a = s  # branch from the centre to the contact point on the wall surface
+    wix, wiy, wiz = ws[i, 0], ws[i, 1], ws[i, 2]
+    vx = vs[i, 0] - wv[w, 0] - a * (wiy * nz - wiz * ny)
+    vy = vs[i, 1] - wv[w, 1] - a * (wiz * nx - wix * nz)
+    vz = vs[i, 2] - wv[w, 2] - a * (wix * ny - wiy * nx)
+    ma = smat[i]
+    mb = wmat[w]
+    fx, fy, fz, mx, my, mz, ed, ef = contact_law(law, prm, ma, mb, delta, nx, ny, nz, vx, vy, vz,
+                                                 wix, wiy, wiz, ri, smass[i], dt,
+                                                 wft, wmr, k, friction, rolling)
+    tx = -a * (ny * fz - nz * fy) + mx
+    ty = -a * (nz * fx - nx * fz) + my
+    tz = -a * (nx * fy - ny * fx) + mz
+    # stiffness the wall's servo sees: spring plus dashpot over one step (a change of wall
+    # velocity changes the dashpot force at once), k_n + c_n / dt
+    m = smass[i]
+    if law == HERTZ:
+        kn = 2.0 * prm[ma, mb, P_ESTAR] * math.sqrt(ri * delta)
+        cn = 2.0 * math.sqrt(5.0 / 6.0) * prm[ma, mb, P_ZETA] * math.sqrt(kn * m)
+    else:
+        kn = prm[ma, mb, P_KN]
+        cn = prm[ma, mb, P_CN] + 2.0 * prm[ma, mb, P_ZETA] * math.sqrt(m * kn)
+    if dt > 0.0:
+        kn += cn / dt
+    return fx, fy, fz, tx, ty, tz, ed, ef, kn, fx * nx + fy * ny + fz * nz
+
+
+@njit
+def place(g, bd, flags, xref, lim2, rebuild):
+    """Clumps: the members follow their body (spheres-only scenes: nothing to do)."""
+    if flags[F_CLUMPS]:
+        _place_members(bd.x, bd.v, bd.w, bd.q, g.xs, g.vs, g.ws, g.sbody, g.soff, xref, lim2, rebuild)
+
+
+@njit(inline="always")
+def volumetric(g):
+    """Sphere contacts need no depth or separation cache; normal forces pass through the centres."""
+    return False
+
+
+@njit
+def primitives(g, bd):
+    """The spheres themselves: (positions, radii, body of each)."""
+    return g.xs, g.rad, g.sbody
+
+
+@njit
+def pair_pass(g, bd, nl, prm, law, flags, dt, frow, trow, erow, bonds, bprm, broke):
+    """Sphere pairs into their rows, then the bonds (their forces into the same row sums)."""
+    friction = flags[F_FRICTION]
+    rolling = flags[F_ROLLING]
+    energy = flags[F_ENERGY]
+    _pair_forces(nl.start, nl.pj, g.xs, g.vs, g.ws, g.rad, g.mat, g.smass, prm, law, dt, nl.ft, nl.mr, friction,
+                 rolling, energy, nl.fc, nl.tj, nl.act, nl.epair, frow, trow, erow)
+    if flags[F_BONDS]:
+        bstart, bj, brstart, brlist, bmodel, bstate, bhist, bfc, btj, bed = bonds
+        if not (friction or rolling):
+            trow[:, :] = 0.0
+        bond_pass(bstart, bj, bmodel, bstate, bhist, bprm, g.xs, g.vs, g.ws, g.rad, g.mat, g.smass, prm, law, dt,
+                  friction, rolling, bfc, btj, bed, frow, trow, erow, energy, broke)
+        bond_gather(brstart, brlist, bfc, btj, bed, frow, trow, erow, energy)
+
+
+@njit
+def wall_contact(g, bd, i, k, wa, nl, prm, law, flags, dt):
+    """Sphere i against wall contact k: writes wfc[k] (force, servo stiffness, normal force);
+    returns (force, torque, dashpot loss, slip loss) on the sphere."""
+    wfx, wfy, wfz, wtx, wty, wtz, ed, ef, kn, wfn = _wall_contact(
+        i, k, nl.wwall[k], g.xs, g.vs, g.ws, g.rad, g.mat, g.smass, wa.kind, wa.point, wa.normal, wa.radius, wa.v,
+        wa.material, prm, law, dt, nl.wft, nl.wmr, flags[F_FRICTION], flags[F_ROLLING])
+    wfc = nl.wfc
+    wfc[k, 0] = wfx
+    wfc[k, 1] = wfy
+    wfc[k, 2] = wfz
+    wfc[k, 3] = kn
+    wfc[k, 4] = wfn
+    return wfx, wfy, wfz, wtx, wty, wtz, ed, ef
+
+
+@njit
+def worst_overlap(g, nl, wa):
+    """Largest overlap ratio: sphere pairs overlap / smaller radius, sphere-wall overlap / radius;
+    returns (ratio, i, j) with j = -1 for a wall (i = -1 when nothing touches)."""
+    xs = g.xs
+    rad = g.rad
+    pi = nl.pi
+    pj = nl.pj
+    act = nl.act
+    worst = 0.0
+    wi = -1
+    wj = -1
+    for c in range(pi.shape[0]):
+        if act[c]:
+            i = pi[c]
+            j = pj[c]
+            d = math.sqrt((xs[i, 0] - xs[j, 0]) ** 2 + (xs[i, 1] - xs[j, 1]) ** 2 + (xs[i, 2] - xs[j, 2]) ** 2)
+            ratio = (rad[i] + rad[j] - d) / min(rad[i], rad[j])
+            if ratio > worst:
+                worst = ratio
+                wi = i
+                wj = j
+    for k in range(nl.wprim.shape[0]):
+        i = nl.wprim[k]
+        wl = nl.wwall[k]
+        sd, _, _, _ = wall_distance(wa.kind[wl], wa.point[wl, 0], wa.point[wl, 1], wa.point[wl, 2], wa.normal[wl, 0],
+                                    wa.normal[wl, 1], wa.normal[wl, 2], wa.radius[wl], xs[i, 0], xs[i, 1], xs[i, 2])
+        ratio = (rad[i] - sd) / rad[i]
+        if ratio > worst:
+            worst = ratio
+            wi = i
+            wj = -1
+    return worst, wi, wj
+
+
+@njit
+def total_strain_energy(pi, pj, xs, rad, smat, prm, law, ft, mr, friction, rolling,
+                        wstart, wwall, wkind, wpoint, wnormal, wradius, wmat, wft, wmr):
+    """Elastic energy in all contacts [J] (serial, fixed order)."""
+    e = 0.0
+    for c in range(pi.shape[0]):
+        i = pi[c]
+        j = pj[c]
+        d = math.sqrt((xs[i, 0] - xs[j, 0]) ** 2 + (xs[i, 1] - xs[j, 1]) ** 2 + (xs[i, 2] - xs[j, 2]) ** 2)
+        delta = rad[i] + rad[j] - d
+        if delta > 0.0:
+            e += strain_energy(law, prm, smat[i], smat[j], delta, rad[i] * rad[j] / (rad[i] + rad[j]),
+                               ft, mr, c, friction, rolling)
+    for i in range(xs.shape[0]):
+        for k in range(wstart[i], wstart[i + 1]):
+            wl = wwall[k]
+            s, _, _, _ = wall_distance(wkind[wl], wpoint[wl, 0], wpoint[wl, 1], wpoint[wl, 2],
+                                       wnormal[wl, 0], wnormal[wl, 1], wnormal[wl, 2], wradius[wl],
+                                       xs[i, 0], xs[i, 1], xs[i, 2])
+            delta = rad[i] - s
+            if delta > 0.0:
+                e += strain_energy(law, prm, smat[i], wmat[wl], delta, rad[i], wft, wmr, k, friction, rolling)
+    return e
