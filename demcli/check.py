@@ -35,6 +35,7 @@ def describe_case(path, overrides=()):
     from demcli.engine.materials import critical_time_step, pair_table
     from demcli.stages import dem
     from demcli.stages.base import STAGE_TYPES, load_case
+    from demcli.stages.timing import step_count, time_step
 
     case = load_case(path, overrides)
     lines = [f"case {path}: valid; {len(case.stages)} stages, dimension {case.dimension}, seed {case.seed}",
@@ -64,8 +65,8 @@ def describe_case(path, overrides=()):
         mats = dem.case_materials(case)
         dtc = critical_time_step(model, pair_table(mats, model), mats, np.array([m]), np.array([r]),
                                  np.array([0]), np.array([mat]))
-        dt = cfg.time.dt if cfg.time.dt is not None else cfg.time.dt_factor * dtc
-        steps = cfg.time.steps if cfg.time.steps is not None else int(math.ceil(cfg.time.duration / dt))
+        dt = time_step(dtc, cfg.time.dt, cfg.time.dt_factor, allow_unstable=True)  # describes; the run checks dt
+        steps = step_count(cfg.time, dt)
         lines.append(f"  time step: {dt:.4g} s = {dt / dtc:.3g} x critical {dtc:.4g} s "
                      f"({model.law}); up to {steps} steps")
     return "\n".join(lines)

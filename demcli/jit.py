@@ -24,12 +24,13 @@ if os.environ.get("NUMBA_THREADING_LAYER") is None:
 
 
 def kernel_digest():
-    """sha256 (16 hex digits) of the demcli sources that define compiled code."""
+    """sha256 (16 hex digits) of the demcli sources that define compiled code, and of every kernels
+    module (layout.py holds the flags, counters and tuples the kernels are compiled against)."""
     root = Path(__file__).resolve().parent
     h = hashlib.sha256()
     for path in sorted(root.rglob("*.py")):
         text = path.read_bytes()
-        if b"njit" in text:
+        if b"njit" in text or path.parent.name == "kernels":  # layout.py: flags, counters, tuples
             h.update(path.relative_to(root).as_posix().encode() + b"\0" + text)
     return h.hexdigest()[:16]
 

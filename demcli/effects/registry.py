@@ -207,8 +207,8 @@ register(EffectSpec(
     "planar", "2D mode: z and out-of-plane rotations locked (disks, mass per unit thickness)",
     source="dimension", declared_by="dimension: 2", flag="planar",
     passes=("kick:planar_lock",),
-    unsupported={"polyhedra": "2D polygons run in the polygon engine (stage polygons); the 3D polyhedra are not "
-                              "confined to a plane"}))
+    unsupported={"polyhedra": "a 2D scene is made of disks (the polygons stage's sections are discretized into "
+                              "bonded disks); a polyhedron's contact is a 3D overlap volume"}))
 register(EffectSpec(
     "bonds", "contact, parallel and Burgers bonds between spheres (declared by a stage that creates them, "
     "derived from a state that holds them)",

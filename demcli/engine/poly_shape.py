@@ -179,7 +179,7 @@ class PolyShape:
         s.clumps = False
         s.L = s.angmom_from_omega()
         # shapes (body-frame CSR tables, used as they are) and per-body rows of the world arrays
-        s.shape_index = np.ascontiguousarray(ph["shape"], np.int64)
+        s.shape = np.ascontiguousarray(ph["shape"], np.int64)
         s.bmat = np.ascontiguousarray(ph["material"], np.int64)
         vs = np.ascontiguousarray(sh["vertex_start"], np.int64)
         fs = np.ascontiguousarray(sh["face_start"], np.int64)
@@ -188,15 +188,15 @@ class PolyShape:
                     np.ascontiguousarray(sh["face_vertices"], np.int64),
                     np.ascontiguousarray(sh["face_normal"], np.float64),
                     np.ascontiguousarray(sh["face_offset"], np.float64))
-        nv = np.diff(vs)[s.shape_index]
-        nf = np.diff(fs)[s.shape_index]
+        nv = np.diff(vs)[s.shape]
+        nf = np.diff(fs)[s.shape]
         s.bvstart = np.zeros(nb + 1, np.int64)
         s.bfstart = np.zeros(nb + 1, np.int64)
         s.bvstart[1:] = np.cumsum(nv)
         s.bfstart[1:] = np.cumsum(nf)
         s.world = (np.zeros((int(s.bvstart[-1]), 3)), np.zeros((int(s.bfstart[-1]), 3)),
                    np.zeros(int(s.bfstart[-1])))
-        s.rad = np.ascontiguousarray(np.asarray(sh["radius"], np.float64)[s.shape_index] * (1.0 + BOUND_PAD))
+        s.rad = np.ascontiguousarray(np.asarray(sh["radius"], np.float64)[s.shape] * (1.0 + BOUND_PAD))
         s.xs = s.x  # the bodies are the particles: the dem stage measures the scene through xs
         s.bonds = BondSet.empty(0)
         s._bond_arrays = s.bonds.kernel_arrays()
@@ -211,7 +211,7 @@ class PolyShape:
         from demcli.kernels.shapes.polyhedra import PolyGeometry
 
         vs, verts, fs, fvs, fv, fn, fo = s.shapes
-        return PolyGeometry(s.rad, s.bmat, s.shape_index, vs, verts, fs, fvs, fv, fn, fo, s.bvstart, s.bfstart,
+        return PolyGeometry(s.rad, s.bmat, s.shape, vs, verts, fs, fvs, fv, fn, fo, s.bvstart, s.bfstart,
                             *s.world)
 
     @staticmethod
@@ -236,7 +236,8 @@ class PolyShape:
         nb = len(s.mass)
         cols = {"ft": (3, s.flags[K.F_FRICTION]), "mr": (3, False), "force": (3, True), "depth": (0, True)}
         start, ci, cj, rows = stored_contacts(groups.get("body_contacts", {}), "i", "j", nb, cols)
-        wstart, wb, ww, wrows = stored_contacts(groups.get("body_wall_contacts", {}), "body", "wall", nb, cols)
+        wstart, wb, ww, wrows = stored_contacts(groups.get("body_wall_contacts", {}), "body", "wall", nb, cols,
+                                                len(s.walls))
         return contacts_tuple(start, ci, cj, rows, wstart, wb, ww, wrows, s.x.copy(), len(s.walls), True, True)
 
     @staticmethod
@@ -281,12 +282,12 @@ class PolyShape:
             return math.inf
         fa = face_areas(s._shape_group)
         fs = s.shapes[2]
-        amax = np.array([fa[fs[k]:fs[k + 1]].max() for k in range(len(fs) - 1)])[s.shape_index]
+        amax = np.array([fa[fs[k]:fs[k + 1]].max() for k in range(len(fs) - 1)])[s.shape]
         kn = s.prm[..., Q_KN]
         # stiffest partner material of each body (walls included)
         mats = np.unique(np.concatenate([s.bmat, np.asarray(s.walls.material, np.int64)]))
         knb = kn[s.bmat][:, mats].max(axis=1)
-        crot = rotational_compliance(s.shapes[1], s.shapes[0], s.shape_index, s.inert)
+        crot = rotational_compliance(s.shapes[1], s.shapes[0], s.shape, s.inert)
         crot[(s.bflags & K.FIX_ROTATION) != 0] = 0.0
         w2 = 2.0 * knb * np.sqrt(amax) * (1.0 / s.mass + crot)
         mobile = (s.bflags & K.FIX_TRANSLATION) == 0
@@ -309,6 +310,10 @@ class PolyShape:
         """(body-body contacts, body-wall contacts) touching at the last evaluation."""
         nl = s.nl
         return int(nl.act.sum()), int(np.count_nonzero(nl.wgeo[:, 0] > 0.0)) if len(nl.wgeo) else 0
+
+    @staticmethod
+    def late_groups(s):
+        return {}
 
     @staticmethod
     def groups(s):

@@ -22,13 +22,16 @@ def _empty2(cols):
     return np.zeros((0, cols))
 
 
-def stored_contacts(group, key_a, key_b, n, columns):
+def stored_contacts(group, key_a, key_b, n, columns, n_b=None):
     """(CSR start, a, b, {name: rows}) of stored contacts sorted by (a, b) (the kernels'
     canonical order). ``columns``: {name: (columns or 0 for a vector, wanted)}; a wanted
-    column missing from the group is zeros, an unwanted one has zero rows."""
+    column missing from the group is zeros, an unwanted one has zero rows. ``n_b``: keep only
+    contacts with b < n_b (wall contacts of walls this stage no longer has)."""
     a = np.asarray(group.get(key_a, _EMPTY_I), np.int64)
     b = np.asarray(group.get(key_b, _EMPTY_I), np.int64)
     order = np.lexsort((b, a))
+    if n_b is not None:
+        order = order[b[order] < n_b]
     a, b = np.ascontiguousarray(a[order]), np.ascontiguousarray(b[order])
     start = np.searchsorted(a, np.arange(n + 1)).astype(np.int64)
     rows = {}
@@ -144,7 +147,8 @@ class SphereShape:
         ns = len(s.rad)
         cols = {"ft": (3, s.flags[K.F_FRICTION]), "mr": (3, s.flags[K.F_ROLLING]), "force": (3, True)}
         start, ci, cj, rows = stored_contacts(groups.get("contacts", {}), "i", "j", ns, cols)
-        wstart, wsph, ww, wrows = stored_contacts(groups.get("wall_contacts", {}), "sphere", "wall", ns, cols)
+        wstart, wsph, ww, wrows = stored_contacts(groups.get("wall_contacts", {}), "sphere", "wall", ns, cols,
+                                                  len(s.walls))
         return contacts_tuple(start, ci, cj, rows, wstart, wsph, ww, wrows, s.xs.copy(), len(s.walls), False, False)
 
     # ---- measures -----------------------------------------------------------------------
@@ -252,7 +256,9 @@ class SphereShape:
             wall_contacts["mr"] = nl.wmr[wact].copy()
         spheres = {"body": s.sbody.copy(), "offset": s.soff.copy(), "radius": s.rad.copy(),
                    "material": s.smat.copy()}
-        out = {"spheres": spheres, "contacts": contacts, "wall_contacts": wall_contacts}
-        if s.plan.has("bonds"):
-            out.update(s.bonds.groups())
-        return out
+        return {"spheres": spheres, "contacts": contacts, "wall_contacts": wall_contacts}
+
+    @staticmethod
+    def late_groups(s):
+        """The bonds' groups (written after walls and energy)."""
+        return s.bonds.groups() if s.plan.has("bonds") else {}

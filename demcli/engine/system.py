@@ -177,10 +177,10 @@ class System:
         self.tq = np.ascontiguousarray(b.get("torque", np.zeros((nb, 3))), np.float64).copy()
         self._angmom = b.get("angmom")
         self._setup_walls(walls)
-        self.shape = (PolyShape if is_polyhedral(groups) else SphereShape)(self, groups)
+        self.plugin = (PolyShape if is_polyhedral(groups) else SphereShape)(self, groups)
         n_prim = len(self.rad)
         self._actors = {k: np.asarray(val) for k, val in groups.get("actors", {}).items()}
-        self.bload, self.nsmall = actor_loads(self._actors, self.shape.body_of_primitive(self), nb)
+        self.bload, self.nsmall = actor_loads(self._actors, self.plugin.body_of_primitive(self), nb)
         energy = self.flags[K.F_ENERGY]
         eg = groups.get("energy", {})
         self.esph = np.zeros((n_prim if energy else 0, 2))
@@ -198,7 +198,7 @@ class System:
         self.adamp[M.A_MAX] = math.inf
         self.counters = np.zeros(K.N_COUNTERS, np.int64)
         self.info = np.zeros(4)
-        self.nl = self.shape.initial_lists(self, groups)
+        self.nl = self.plugin.initial_lists(self, groups)
         self.skin = self.dyn.skin * float(self.rad.mean()) if n_prim else 0.0
         self.max_cells = max(64, 8 * n_prim)
         self._fresh_lists = True
@@ -246,11 +246,9 @@ class System:
         """Bodies with a general inertia tensor integrate L (clumps, polyhedra)."""
         return len(self.L) == len(self.x) and len(self.x) > 0
 
-    rotation_from_angmom = rigid
-
     def critical_dt(self):
         """Critical time step of this scene [s] (the shape's estimate; see its ``critical_dt``)."""
-        return self.shape.critical_dt(self)
+        return self.plugin.critical_dt(self)
 
     @staticmethod
     def step_kernel():
@@ -282,16 +280,16 @@ class System:
         from demcli.kernels.engine import run_steps
 
         self.adamp[M.A_MAX] = self.alpha_bounds[1] / self.dt if self.dt > 0 else math.inf
-        bonds, bprm = self.shape.bond_arrays(self)
+        bonds, bprm = self.plugin.bond_arrays(self)
         status, done, self.time, self.nl = run_steps(
             int(nsteps), self.time, self.flags, self.prm, self.kernel_params(), self.kernel_bodies(),
-            self.shape.geometry(self), self.shape.members(self), self.kernel_walls(), self.nl, bonds, bprm,
+            self.plugin.geometry(self), self.plugin.members(self), self.kernel_walls(), self.nl, bonds, bprm,
             self.adamp, self.esph, self.ebody, self.eacc, self.counters, self.info, self._fresh_lists, self.step,
             self.prime)
         self._fresh_lists = False
         self.prime = False
         self.step += int(done)
-        self.shape.after_advance(self)
+        self.plugin.after_advance(self)
         return int(status), int(done)
 
     def set_actor_start(self, name, t0):
@@ -318,7 +316,7 @@ class System:
 
     def strain_energy(self):
         """Elastic energy in contacts and bonds [J] (the shape's; polyhedra: an estimate)."""
-        return self.shape.strain_energy(self)
+        return self.plugin.strain_energy(self)
 
     def losses(self):
         """Cumulative energy [J]: contact dashpots, slip, body damping, and work done by walls."""
@@ -341,7 +339,7 @@ class System:
 
     def contact_count(self):
         """(primitive-primitive contacts, primitive-wall contacts) touching at the last evaluation."""
-        return self.shape.contact_count(self)
+        return self.plugin.contact_count(self)
 
     # ---- snapshots ------------------------------------------------------------------
     _MUTABLE = ("x", "v", "w", "q", "L", "f", "tq", "wpoint", "wv", "wforce", "esph", "ebody", "eacc", "adamp", "nl",
@@ -368,7 +366,7 @@ class System:
     def snapshot(self):
         """Copies of everything the step loop mutates (to restore the last good state)."""
         out = {}
-        for k in self._MUTABLE + self.shape.MUTABLE:
+        for k in self._MUTABLE + self.plugin.MUTABLE:
             val = getattr(self, k)
             if isinstance(val, K.Contacts):
                 out[k] = K.Contacts(*(a.copy() for a in val))
@@ -405,9 +403,10 @@ class System:
                  "force": self.wforce.copy(),
                  "extent": np.asarray(w.extent) + np.tile(self.wpoint - self.wpoint0, 2)}
         out = {"bodies": bodies}
-        out.update(self.shape.groups(self))
+        out.update(self.plugin.groups(self))
         out["walls"] = walls
         out["energy"] = {k: np.float64(v) for k, v in self.losses().items()}
+        out.update(self.plugin.late_groups(self))
         if len(self._actors):
             out["actors"] = {k: v.copy() for k, v in self._actors.items()}
         if self.adaptive_damping:
@@ -417,25 +416,25 @@ class System:
 
     # ---- sphere scenes (bonds, measures on spheres) -----------------------------------
     def _spheres_only(self, what):
-        if self.shape.name != "spheres":
-            raise ValueError(f"{what} is for sphere and clump scenes; this scene holds {self.shape.name}")
+        if self.plugin.name != "spheres":
+            raise ValueError(f"{what} is for sphere and clump scenes; this scene holds {self.plugin.name}")
 
     def bond_touching(self, gap, fraction=1.0, rng=None, stress_free=False):
         """Bond touching sphere pairs (:meth:`demcli.engine.sphere_shape.SphereShape.bond_touching`)."""
         self._spheres_only("bonding")
-        return self.shape.bond_touching(self, gap, fraction, rng, stress_free)
+        return self.plugin.bond_touching(self, gap, fraction, rng, stress_free)
 
     def stress(self, volume):
         """Mean stress in the particles [Pa], (3, 3), compression positive: the contact and
         bond virial over ``volume`` [m^3] (:func:`demcli.kernels.measures.contact_virial`)."""
         self._spheres_only("the contact virial")
-        return self.shape.stress(self, volume)
+        return self.plugin.stress(self, volume)
 
     def contacts_per_sphere(self):
         """(n_s,) touching sphere-sphere contacts, intact bonds and seated pairs compressed beyond
         their delta_0 of each sphere."""
         self._spheres_only("the coordination per sphere")
-        return self.shape.contacts_per_sphere(self)
+        return self.plugin.contacts_per_sphere(self)
 
     def scale_radii(self, factor):
         """Spheres-only scenes: radii x factor (scalar or per sphere), masses x factor^3 and

@@ -64,7 +64,7 @@ def rebuild_lists(g, bd, nl, par, flags, wa, bonds, bprm, vol, pair_torque):
     skin = par.skin
     nstart, npi, npj = build_pairs(xs[:nsmall], rad[:nsmall], prim_body[:nsmall], skin, par.max_cells)
     if nsmall < ns:
-        nstart, npi, npj = add_actor_pairs(nstart, npj, xs, rad, nsmall, skin)
+        nstart, npi, npj = add_actor_pairs(nstart, npj, xs, rad, prim_body, nsmall, skin)
     if flags[F_BONDS]:
         bstart, bj, brstart, brlist, bmodel, bstate, bhist, bfc, btj, bed = bonds
         nstart, npi, npj = drop_bonded(nstart, npi, npj, bstart, bj, bmodel, bstate, bhist, bprm)

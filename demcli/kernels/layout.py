@@ -53,7 +53,6 @@ j tj, touching flag act (uint8), losses epair; polyhedra: geo (depth, F_N, K_t),
 cached separating face or direction); per primitive-wall contact wstart, wprim, wwall, wft, wmr,
 wfc (force on the primitive, servo stiffness, normal force), wgeo; xref (positions at the last
 list build), wref (wall displacement since). Arrays of inactive effects have zero rows."""
-CONTACT_FIELDS = Contacts._fields
 
 Members = namedtuple("Members", "mstart mlist xs fs ts")
 """Clumps: mstart (n_b + 1,), mlist (n_s,) the member spheres of each body; xs their positions, fs, ts

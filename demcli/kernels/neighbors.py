@@ -242,14 +242,14 @@ def build_wall_pairs(xs, rad, skin, wkind, wpoint, wnormal, wradius):
 
 
 @njit
-def add_actor_pairs(start, pj, x, rad, nsmall, skin):
-    """Pair list of all bodies from the cell-grid list of the first ``nsmall`` ones.
+def add_actor_pairs(start, pj, x, rad, body, nsmall, skin):
+    """Pair list of all primitives from the cell-grid list of the first ``nsmall`` ones.
 
-    Bodies nsmall.. are actors (a loading plate, a sleeper): far larger than the
+    Primitives nsmall.. belong to actors (a loading plate, a sleeper): far larger than the
     particles, so they stay out of the cell grid (whose cells follow the largest
-    radius) and are paired here with every body whose bounding sphere comes within
-    ``skin`` of theirs. Rows stay sorted by j (actors have the highest indices).
-    Returns (start, pi, pj) over all bodies.
+    radius) and are paired here with every primitive of another body (``body``: the body of
+    each) whose sphere comes within ``skin`` of theirs. Rows stay sorted by j (actors have the
+    highest indices). Returns (start, pi, pj) over all primitives.
     """
     nb = x.shape[0]
     cnt = np.zeros(nb, np.int64)
@@ -258,7 +258,7 @@ def add_actor_pairs(start, pj, x, rad, nsmall, skin):
             cnt[i] = start[i + 1] - start[i]
         for a in range(max(i + 1, nsmall), nb):
             r = rad[i] + rad[a] + skin
-            if (x[i, 0] - x[a, 0]) ** 2 + (x[i, 1] - x[a, 1]) ** 2 + (x[i, 2] - x[a, 2]) ** 2 < r * r:
+            if body[i] != body[a] and (x[i, 0] - x[a, 0]) ** 2 + (x[i, 1] - x[a, 1]) ** 2 + (x[i, 2] - x[a, 2]) ** 2 < r * r:
                 cnt[i] += 1
     nstart = np.zeros(nb + 1, np.int64)
     for i in range(nb):
@@ -274,7 +274,7 @@ def add_actor_pairs(start, pj, x, rad, nsmall, skin):
                 k += 1
         for a in range(max(i + 1, nsmall), nb):
             r = rad[i] + rad[a] + skin
-            if (x[i, 0] - x[a, 0]) ** 2 + (x[i, 1] - x[a, 1]) ** 2 + (x[i, 2] - x[a, 2]) ** 2 < r * r:
+            if body[i] != body[a] and (x[i, 0] - x[a, 0]) ** 2 + (x[i, 1] - x[a, 1]) ** 2 + (x[i, 2] - x[a, 2]) ** 2 < r * r:
                 npi[k] = i
                 npj[k] = a
                 k += 1

@@ -19,10 +19,11 @@ import numpy as np
 
 from demcli import interrupts
 from demcli.effects import check_shape
-from demcli.errors import InputError, StageError
+from demcli.errors import StageError
 from demcli.progress import StopForecast
 from demcli.stages.dem import (build_walls, case_materials, contact_model, declared_effects, is_polyhedral, lay_walls,
                                phase_models, set_bond_models)
+from demcli.stages.timing import stage_time_step, step_count
 from demcli.stepping import Stepper
 from demcli.state.fields import Field, register, register_group
 
@@ -83,13 +84,7 @@ def make_system(ctx, cfg, groups, time=0.0, step=0, resume=False):
             n = system.bond_touching(cfg.bonds.gap * float(system.rad.mean()), stress_free=free)
             ctx.log(f"bonded {n} touching pairs ({len(system.bonds)} bonds)")
     dt_crit = system.critical_dt()
-    if cfg.time.dt is not None:
-        dt = cfg.time.dt
-        if dt > dt_crit and not cfg.safety.allow_unstable_dt:
-            raise InputError(f"stage {ctx.name}: time.dt = {dt:.4g} s is {dt / dt_crit:.3g} times the critical "
-                             f"step {dt_crit:.4g} s; lower it or use time.dt_factor")
-    else:
-        dt = cfg.time.dt_factor * dt_crit
+    dt = stage_time_step(cfg, dt_crit, f"stage {ctx.name}")
     system.dt = dt
     if not resume:  # a resumed stage takes its walls' positions from the checkpoint
         for row, (gap, d) in lay_walls(cfg, system.wpoint, groups).items():
@@ -346,7 +341,7 @@ def _setup(ctx, cfg, state_in, hooks):
         dt, total, rec_every = hooks.timing(system, dt, dt_crit)
         system.dt = dt
     else:
-        total = cfg.time.steps if cfg.time.steps is not None else int(math.ceil(cfg.time.duration / dt))
+        total = step_count(cfg.time, dt)
         rec_every = max(1, total // cfg.output.records)
     return ckpt, system, plan, dt, dt_crit, total, rec_every
 

@@ -20,10 +20,8 @@ from demcli.engine.actors import actor_index, add_actor, box_polyhedron, haversi
 from demcli.engine.materials import ContactModel, Material  # noqa: E402
 from demcli.engine.plan import make_plan  # noqa: E402
 from demcli.engine.poly_shape import polyhedra_groups
-from demcli.engine.system import System  # noqa: E402
-from demcli.engine.system import Dynamics  # noqa: E402
-from demcli.kernels.neighbors import build_pairs  # noqa: E402
-from demcli.kernels.neighbors import add_actor_pairs# noqa: E402
+from demcli.engine.system import Dynamics, System  # noqa: E402
+from demcli.kernels.neighbors import add_actor_pairs, build_pairs  # noqa: E402
 
 STEEL = 7800.0
 
@@ -106,7 +104,7 @@ def test_actor_pairs_equal_a_brute_force_search():
     skin = 0.004
     start, _, pj = build_pairs(x[:n], rad[:n], np.arange(n), skin, 10000)
     # When: the actors are added to the particles' list
-    st, pi, pj2 = add_actor_pairs(start, pj, x, rad, n, skin)
+    st, pi, pj2 = add_actor_pairs(start, pj, x, rad, np.arange(len(x)), n, skin)
     # Then: the pairs are exactly those closer than the skin (bounding spheres), rows sorted by j
     got = set(zip(pi.tolist(), pj2.tolist()))
     d = np.linalg.norm(x[:, None] - x[None], axis=2)

@@ -156,7 +156,7 @@ SPECIFIC = {  # faults of one case's stages: order, cross-stage rules, memory
         ("library-seed-huge", lambda d: _stage(d, "ballast_library").update(seed=2 ** 64)),
         ("library-before-gradation", lambda d: d["stages"].insert(0, d["stages"].pop(1))),
         ("no-library", lambda d: d["stages"].pop(1)),
-        ("energy-on-polyhedra", lambda d: _stage(d, "deposit")["physics"].update(energy=True)),
+        ("rolling-on-polyhedra", lambda d: _stage(d, "deposit")["physics"].update(rolling_resistance=True)),
         ("planar-ballast", lambda d: d.update(dimension=2)),
         ("no-class-for-library", lambda d: _stage(d, "gradation").update(passing=[10, 20, 30, 40, 79, 95])),
     ],

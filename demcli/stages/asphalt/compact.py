@@ -42,8 +42,6 @@ state is a function of the record rows, which the checkpoint keeps, and the stag
 faces' control again from it before the first step (the ``start`` hook).
 """
 
-import math
-
 import numpy as np
 
 from demcli.config.schema import Float, Int, Optional, Section, Str
@@ -51,6 +49,7 @@ from demcli.errors import InputError
 from demcli.stages import dem, loop
 from demcli.stages.asphalt.common import copy_group, solid_volume  # (it registers the seeds and aggregates groups)
 from demcli.stages.base import ENGINE_KEEPS, ENGINE_OUTPUT, StageType, register_stage
+from demcli.stages.timing import step_count, time_step
 from demcli.state.fields import Field, register, register_group
 from demcli.state.records import describe_column
 
@@ -351,8 +350,8 @@ def describe(cfg, case):
     mats = dem.case_materials(case)
     dtc = critical_time_step(model, pair_table(mats, model), mats, np.array([m]), np.array([r]), np.array([0]),
                              np.array([mat]))
-    dt = cfg.time.dt if cfg.time.dt is not None else cfg.time.dt_factor * dtc
-    steps = cfg.time.steps if cfg.time.steps is not None else int(math.ceil(cfg.time.duration / dt))
+    dt = time_step(dtc, cfg.time.dt, cfg.time.dt_factor, allow_unstable=True)  # describes; the run checks dt
+    steps = step_count(cfg.time, dt)
     lines.append(f"time step: {dt:.4g} s = {dt / dtc:.3g} x critical {dtc:.4g} s ({model.law}, one-ball "
                  f"aggregate); up to {steps} steps")
     return "\n".join(lines)

@@ -39,6 +39,7 @@ from demcli.config.schema import Float, Int, List, Optional, Section, Str, Tagge
 from demcli.errors import InputError, StageError
 from demcli.stages import dem, loop
 from demcli.stages.base import ENGINE_KEEPS, ENGINE_OUTPUT, StageType, register_stage
+from demcli.stages.timing import time_step
 from demcli.state.fields import Field, register, register_group
 from demcli.state.records import describe_column
 from demcli.stepping import Stepper
@@ -210,7 +211,7 @@ def run_prepare(ctx, cfg, state_in):
     eq = cfg.equilibrium
 
     def set_dt():
-        system.dt = cfg.dt_factor * system.critical_dt()
+        system.dt = time_step(system.critical_dt(), dt_factor=cfg.dt_factor)
 
     def cycle(max_steps):
         done = 0
