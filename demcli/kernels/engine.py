@@ -11,7 +11,7 @@ One call advances a chunk of steps without returning to Python. Each step:
 4. rebuild of the pair and wall lists when needed (:func:`rebuild_lists`), history carried over;
 5. the shape's ``pair_pass``: one force per pair into its own row, the row owner summing its side;
 6. the gather (:func:`gather`): each primitive sums its row, the j sides through the reverse
-   list and its wall contacts (the shape's ``wall_contact``), in a fixed order (bit-identical
+   list and its wall contacts (computed by the shape's ``wall_pass``), in a fixed order (bit-identical
    for any thread count); a primitive that is its own body then finishes the step
    (:func:`demcli.kernels.motion.finish_body`: body loads, actor force, second half kick) and,
    for spin rotors without adaptive damping, fuses the next step's first kick and drift; clump
@@ -38,7 +38,7 @@ from demcli.kernels.layout import (BAD_ENERGY, BAD_NUMBER, BAD_OVERLAP, C_BODY, 
                                    F_CLUMPS, F_ENERGY, F_FRICTION, F_GRAVITY, F_LOCAL, F_PLANAR, F_ROLLING,
                                    F_VISCOUS, OK)
 from demcli.kernels.neighbors import add_actor_pairs, build_pairs, build_reverse, build_wall_pairs, carry_history
-from demcli.kernels.shapes import pair_pass, place, primitives, volumetric, wall_contact, worst_overlap
+from demcli.kernels.shapes import pair_pass, place, primitives, volumetric, wall_pass, worst_overlap
 
 
 @njit
@@ -62,9 +62,12 @@ def rebuild_lists(g, bd, nl, par, flags, wa, bonds, bprm, vol, pair_torque):
     ns = xs.shape[0]
     nsmall = par.nsmall
     skin = par.skin
-    nstart, npi, npj = build_pairs(xs[:nsmall], rad[:nsmall], prim_body[:nsmall], skin, par.max_cells)
-    if nsmall < ns:
+    if nsmall < ns:  # actors: the particles alone through the cell grid (contiguous copies)
+        nstart, npi, npj = build_pairs(xs[:nsmall].copy(), rad[:nsmall].copy(), prim_body[:nsmall].copy(), skin,
+                                       par.max_cells)
         nstart, npi, npj = add_actor_pairs(nstart, npj, xs, rad, prim_body, nsmall, skin)
+    else:
+        nstart, npi, npj = build_pairs(xs, rad, prim_body, skin, par.max_cells)
     if flags[F_BONDS]:
         bstart, bj, brstart, brlist, bmodel, bstate, bhist, bfc, btj, bed = bonds
         nstart, npi, npj = drop_bonded(nstart, npi, npj, bstart, bj, bmodel, bstate, bhist, bprm)
@@ -77,7 +80,8 @@ def rebuild_lists(g, bd, nl, par, flags, wa, bonds, bprm, vol, pair_torque):
     act = np.zeros(npair, np.uint8)
     if not vol:
         mark_history(act, nft, nmr, friction, rolling)
-    wstart, wprim, wwall, wft, wmr, wfc, wgeo = nl.wstart, nl.wprim, nl.wwall, nl.wft, nl.wmr, nl.wfc, nl.wgeo
+    wstart, wprim, wwall, wft, wmr, wfc, wtq, wen, wgeo = (nl.wstart, nl.wprim, nl.wwall, nl.wft, nl.wmr, nl.wfc,
+                                                           nl.wtq, nl.wen, nl.wgeo)
     if wa.v.shape[0] > 0:
         nws, nwp, nww = build_wall_pairs(xs, rad, skin, wa.kind, wa.point, wa.normal, wa.radius)
         nq = nww.shape[0]
@@ -87,18 +91,20 @@ def rebuild_lists(g, bd, nl, par, flags, wa, bonds, bprm, vol, pair_torque):
         carry_history(ns, nws, nww, wstart, wwall, wmr, nwmr)
         wstart, wprim, wwall, wft, wmr = nws, nwp, nww, nwft, nwmr
         wfc = np.zeros((nq, 5))
+        wtq = np.zeros((nq, 3))
+        wen = np.zeros((nq if flags[F_ENERGY] else 0, 2))
         wgeo = np.zeros((nq if vol else 0, 3))
         nl.wref[:, :] = 0.0
     return Contacts(nstart, npi, npj, rstart, rlist, nft, nmr, np.zeros((npair, 3)),
                     np.zeros((npair if pair_torque else 0, 3)), act,
                     np.zeros((npair if flags[F_ENERGY] else 0, 2)), np.zeros((npair if vol else 0, 3)),
                     np.zeros(npair if vol else 0, np.int32), np.zeros((npair if vol else 0, 3)),
-                    wstart, wprim, wwall, wft, wmr, wfc, wgeo, xs.copy(), nl.wref)
+                    wstart, wprim, wwall, wft, wmr, wfc, wtq, wen, wgeo, xs.copy(), nl.wref)
 
 
 @njit(parallel=True)
-def gather(g, bd, mb, nl, wa, prm, par, flags, sw, gs, dt, frow, trow, erow, esph, ebody, eabs, kevec, alpha,
-           tload, xref, lim2, rebuild):
+def gather(bd, mb, nl, par, flags, sw, gs, dt, frow, trow, erow, esph, ebody, eabs, kevec, alpha, tload, xref, lim2,
+           rebuild):
     """Per primitive: its own row sums, the j sides of its pairs, its wall contacts; a primitive
     that is its own body then finishes the step (motion.finish_body), and with ``fuse_next``
     takes the next step's first half kick and drift (the same arithmetic as kick_drift);
@@ -108,9 +114,8 @@ def gather(g, bd, mb, nl, wa, prm, par, flags, sw, gs, dt, frow, trow, erow, esp
     """
     pair_torque, torque, body_prims, fuse_next = gs
     energy = flags[F_ENERGY]
-    law = par.law
     h = 0.5 * dt
-    c1p, c2p = M.damping_factors(alpha, h)
+    cc = M.damping_factors(alpha, h)
     rstart = nl.rstart
     rlist = nl.rlist
     act = nl.act
@@ -118,11 +123,14 @@ def gather(g, bd, mb, nl, wa, prm, par, flags, sw, gs, dt, frow, trow, erow, esp
     tj = nl.tj
     epair = nl.epair
     wstart = nl.wstart
+    wfc = nl.wfc
+    wtq = nl.wtq
+    wen = nl.wen
     rotate_body = sw[4]
     planar = sw[6]
-    # arrays taken out of the tuples before the parallel loop: an inlined function handed
-    # ``bd.v`` inside a prange body loses its writes (numba 0.68)
-    x, v, w, L, inert, mass, bflags = bd.x, bd.v, bd.w, bd.L, bd.inert, bd.mass, bd.flags
+    # arrays taken out of the tuples before the parallel loop (see kernels/shapes/__init__.py)
+    x, v, w, q, L, f, tq, mass, inert, bflags, load = bd
+    gravity, damping = par.gravity, (par.local, par.visc)
     fs = mb.fs
     ts = mb.ts
     for i in prange(frow.shape[0]):
@@ -155,16 +163,15 @@ def gather(g, bd, mb, nl, wa, prm, par, flags, sw, gs, dt, frow, trow, erow, esp
                     e0 += epair[c, 0]
                     e1 += epair[c, 1]
         for k in range(wstart[i], wstart[i + 1]):
-            wfx, wfy, wfz, wtx, wty, wtz, ed, ef = wall_contact(g, bd, i, k, wa, nl, prm, law, flags, dt)
-            fx += wfx
-            fy += wfy
-            fz += wfz
-            tx += wtx
-            ty += wty
-            tz += wtz
-            # a wall contact's loss is wholly the primitive's (pairs split theirs in half)
-            e0 += 2.0 * ed
-            e1 += 2.0 * ef
+            fx += wfc[k, 0]
+            fy += wfc[k, 1]
+            fz += wfc[k, 2]
+            tx += wtq[k, 0]
+            ty += wtq[k, 1]
+            tz += wtq[k, 2]
+            if energy:  # a wall contact's loss is wholly the primitive's (pairs split theirs in half)
+                e0 += 2.0 * wen[k, 0]
+                e1 += 2.0 * wen[k, 1]
         if energy:
             esph[i, 0] += 0.5 * e0
             esph[i, 1] += 0.5 * e1
@@ -176,8 +183,9 @@ def gather(g, bd, mb, nl, wa, prm, par, flags, sw, gs, dt, frow, trow, erow, esp
             ts[i, 1] = ty
             ts[i, 2] = tz
             continue
-        fx, fy, fz, tx, ty, tz = M.finish_body(i, fx, fy, fz, tx, ty, tz, bd, par, sw, dt, h, c1p, c2p, alpha,
-                                               tload, not fuse_next, ebody, eabs, kevec)
+        fx, fy, fz, tx, ty, tz = M.finish_body(i, fx, fy, fz, tx, ty, tz, v, w, L, q, inert, mass, bflags, f, tq, load,
+                                               gravity, damping, sw, dt, h, cc, alpha, tload, not fuse_next, ebody,
+                                               eabs, kevec)
         if fuse_next:  # the next step's first half kick and drift
             M.kick(i, bflags[i], v, w, L, inert, mass[i], fx, fy, fz, tx, ty, tz, h, 1.0, 1.0, rotate_body, False,
                    planar, False)
@@ -189,8 +197,11 @@ def member_loads(bd, mb, par, sw, dt, alpha, tload, ebody, eabs, kevec):
     """Clumps: each body sums its members' forces and torques (about its centre of mass, in
     member order), then finishes the step (motion.finish_body)."""
     h = 0.5 * dt
-    c1p, c2p = M.damping_factors(alpha, h)
-    x = bd.x
+    cc = M.damping_factors(alpha, h)
+    x, v, w, q, L, f, tq, mass, inert, bflags, load = bd
+    gravity, damping = par.gravity, (par.local, par.visc)
+    mstart = mb.mstart
+    mlist = mb.mlist
     xs = mb.xs
     fs = mb.fs
     ts = mb.ts
@@ -201,8 +212,8 @@ def member_loads(bd, mb, par, sw, dt, alpha, tload, ebody, eabs, kevec):
         tx = 0.0
         ty = 0.0
         tz = 0.0
-        for a in range(mb.mstart[b], mb.mstart[b + 1]):
-            s = mb.mlist[a]
+        for a in range(mstart[b], mstart[b + 1]):
+            s = mlist[a]
             rx = xs[s, 0] - x[b, 0]
             ry = xs[s, 1] - x[b, 1]
             rz = xs[s, 2] - x[b, 2]
@@ -212,8 +223,8 @@ def member_loads(bd, mb, par, sw, dt, alpha, tload, ebody, eabs, kevec):
             tx += ts[s, 0] + ry * fs[s, 2] - rz * fs[s, 1]
             ty += ts[s, 1] + rz * fs[s, 0] - rx * fs[s, 2]
             tz += ts[s, 2] + rx * fs[s, 1] - ry * fs[s, 0]
-        M.finish_body(b, fx, fy, fz, tx, ty, tz, bd, par, sw, dt, h, c1p, c2p, alpha, tload, True, ebody, eabs,
-                      kevec)
+        M.finish_body(b, fx, fy, fz, tx, ty, tz, v, w, L, q, inert, mass, bflags, f, tq, load, gravity, damping, sw,
+                      dt, h, cc, alpha, tload, True, ebody, eabs, kevec)
 
 
 @njit
@@ -339,8 +350,10 @@ def run_steps(nsteps, time, flags, prm, par, bd, g, mb, wa, nl, bonds, bprm, ada
                 rebuild[0] = 1
             counters[C_BONDS] += 1
         _count_effects(counters, flags, adaptive)
-        gather(g, bd, mb, nl, wa, prm, par, flags, sw, (pair_torque, torque, body_prims, fuse_next), h, frow, trow,
-               erow, esph, ebody, eabs, kevec, alpha, time + h, nl.xref, lim2, rebuild)
+        if nw > 0:
+            wall_pass(g, bd, nl, wa, prm, par.law, flags, h)
+        gather(bd, mb, nl, par, flags, sw, (pair_torque, torque, body_prims, fuse_next), h, frow, trow, erow, esph,
+               ebody, eabs, kevec, alpha, time + h, nl.xref, lim2, rebuild)
         counters[C_GATHER] += 1
         if fuse_next:
             drifted = True

@@ -28,6 +28,7 @@ FIX_ROTATION = 2
 FIX_X = 4          # velocity component x held at its value (FIX_X << d for axis d)
 FIX_Y = 8
 FIX_Z = 16
+FIX_XYZ = FIX_X | FIX_Y | FIX_Z
 LOADED = 32        # an actor: the body carries a prescribed external force (its row of the load table)
 
 # the tuples the engine's kernels take (numba named tuples of arrays and numbers)
@@ -46,12 +47,13 @@ WallArrays = namedtuple("WallArrays", "kind point normal radius v material contr
 force (sum of contact forces on each wall), kn (servo stiffness)."""
 
 Contacts = namedtuple("Contacts", "start pi pj rstart rlist ft mr fc tj act epair geo sep sdir "
-                                  "wstart wprim wwall wft wmr wfc wgeo xref wref")
+                                  "wstart wprim wwall wft wmr wfc wtq wen wgeo xref wref")
 """Neighbour and contact state, rebuilt by the engine: pair CSR (start, pi, pj; i < j) and its
 reverse (rstart, rlist); per pair tangential spring ft, rolling spring mr, force on i fc, torque on
 j tj, touching flag act (uint8), losses epair; polyhedra: geo (depth, F_N, K_t), sep / sdir (the
 cached separating face or direction); per primitive-wall contact wstart, wprim, wwall, wft, wmr,
-wfc (force on the primitive, servo stiffness, normal force), wgeo; xref (positions at the last
+wfc (force on the primitive, servo stiffness, normal force), wtq (torque on the primitive), wen
+(dashpot and slip losses of the step), wgeo; xref (positions at the last
 list build), wref (wall displacement since). Arrays of inactive effects have zero rows."""
 
 Members = namedtuple("Members", "mstart mlist xs fs ts")

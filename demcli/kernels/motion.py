@@ -28,7 +28,7 @@ from numba import prange
 
 from demcli.jit import njit
 from demcli.kernels import quat
-from demcli.kernels.layout import FIX_ROTATION, FIX_TRANSLATION, FIX_X, LOADED
+from demcli.kernels.layout import FIX_ROTATION, FIX_TRANSLATION, FIX_X, FIX_XYZ, LOADED
 from demcli.kernels.walls import (FORCE, PRESSURE, SERVO, W_AMPLITUDE, W_AREA, W_FREQ, W_GAIN, W_MASS,
                                   W_PHASE, W_RATE, W_START, W_TARGET, W_VMAX, applied_force)
 
@@ -98,38 +98,40 @@ def drift(x, v, i, dt, xref, lim2, rebuild):
 @njit(inline="always")
 def kick(b, fl, v, w, L, inert, m, fx, fy, fz, tx, ty, tz, h, c1, c2, rotate_body, rigid, planar, adaptive):
     """Half kick of body b: v, and omega (spin rotor) or L (rigid rotor; omega is left to the
-    caller, who rotates or recomputes it). With ``adaptive`` returns the energy measures of
-    the adaptive damping (m sum ((v0 + v1)/2)^2, the rotational omega.L before the kick, and
-    for spin rotors after it); zeros otherwise."""
+    caller, who rotates or recomputes it). With ``adaptive`` the damped form (c1, c2) and the
+    energy measures of the adaptive damping (m sum ((v0 + v1)/2)^2, the rotational omega.L before
+    the kick, and for spin rotors after it) are returned; zeros otherwise (c1 = c2 = 1: the plain
+    kick, the same numbers)."""
     et = 0.0
     er0 = 0.0
     er1 = 0.0
     if fl & FIX_TRANSLATION == 0:
         im = h / m
-        s = 0.0
-        if fl & FIX_X == 0:
-            v0 = v[b, 0]
-            v[b, 0] = (v0 * c1 + fx * im) * c2
-            s += (0.5 * (v0 + v[b, 0])) ** 2
-        if fl & (FIX_X << 1) == 0:
-            v0 = v[b, 1]
-            v[b, 1] = (v0 * c1 + fy * im) * c2
-            s += (0.5 * (v0 + v[b, 1])) ** 2
-        if fl & (FIX_X << 2) == 0:
-            v0 = v[b, 2]
-            v[b, 2] = (v0 * c1 + fz * im) * c2
-            s += (0.5 * (v0 + v[b, 2])) ** 2
+        if adaptive or fl & FIX_XYZ:
+            s = 0.0
+            for d in range(3):
+                if fl & (FIX_X << d) == 0:
+                    v0 = v[b, d]
+                    v[b, d] = (v0 * c1 + (fx if d == 0 else fy if d == 1 else fz) * im) * c2
+                    s += (0.5 * (v0 + v[b, d])) ** 2
+            et = m * s
+        else:
+            v[b, 0] += fx * im
+            v[b, 1] += fy * im
+            v[b, 2] += fz * im
         if planar:
             v[b, 2] = 0.0
-        if adaptive:
-            et = m * s
     if rotate_body and fl & FIX_ROTATION == 0:
         if rigid:
             if adaptive:
                 er0 = w[b, 0] * L[b, 0] + w[b, 1] * L[b, 1] + w[b, 2] * L[b, 2]
-            L[b, 0] = (L[b, 0] * c1 + h * tx) * c2
-            L[b, 1] = (L[b, 1] * c1 + h * ty) * c2
-            L[b, 2] = (L[b, 2] * c1 + h * tz) * c2
+                L[b, 0] = (L[b, 0] * c1 + h * tx) * c2
+                L[b, 1] = (L[b, 1] * c1 + h * ty) * c2
+                L[b, 2] = (L[b, 2] * c1 + h * tz) * c2
+            else:
+                L[b, 0] += h * tx
+                L[b, 1] += h * ty
+                L[b, 2] += h * tz
             if planar:
                 L[b, 0] = 0.0
                 L[b, 1] = 0.0
@@ -138,14 +140,17 @@ def kick(b, fl, v, w, L, inert, m, fx, fy, fz, tx, ty, tz, h, c1, c2, rotate_bod
             iv = h / ii
             if adaptive:
                 er0 = ii * (w[b, 0] ** 2 + w[b, 1] ** 2 + w[b, 2] ** 2)
-            w[b, 0] = (w[b, 0] * c1 + tx * iv) * c2
-            w[b, 1] = (w[b, 1] * c1 + ty * iv) * c2
-            w[b, 2] = (w[b, 2] * c1 + tz * iv) * c2
+                w[b, 0] = (w[b, 0] * c1 + tx * iv) * c2
+                w[b, 1] = (w[b, 1] * c1 + ty * iv) * c2
+                w[b, 2] = (w[b, 2] * c1 + tz * iv) * c2
+                er1 = ii * (w[b, 0] ** 2 + w[b, 1] ** 2 + w[b, 2] ** 2)
+            else:
+                w[b, 0] += tx * iv
+                w[b, 1] += ty * iv
+                w[b, 2] += tz * iv
             if planar:
                 w[b, 0] = 0.0
                 w[b, 1] = 0.0
-            if adaptive:
-                er1 = ii * (w[b, 0] ** 2 + w[b, 1] ** 2 + w[b, 2] ** 2)
     return et, er0, er1
 
 
@@ -230,31 +235,31 @@ def body_loads(fx, fy, fz, tx, ty, tz, m, ii, vx, vy, vz, wx, wy, wz, gravity, l
     return fx, fy, fz, tx, ty, tz, p
 
 
-@njit
-def finish_body(b, fx, fy, fz, tx, ty, tz, bd, par, sw, dt, h, c1p, c2p, alpha, tload, store, ebody, eabs, kevec):
+@njit(inline="always")
+def finish_body(b, fx, fy, fz, tx, ty, tz, v, w, L, q, inert, mass, bflags, f, tq, load, gravity, damping, sw,
+                dt, h, cc, alpha, tload, store, ebody, eabs, kevec):
     """Second half of a step for body b with its contact loads (fx..tz): body loads (gravity,
     damping, actor force), the loads kept in f/tq when ``store``, the second half kick (rigid
     rotors: omega from the kicked L), losses booked. Returns the total loads.
 
-    bd: the Bodies tuple; par: the Params tuple (gravity, local, visc); sw: switches
-    (gravity, local, viscous, energy, rotate, rigid, planar, adaptive); dt: the contact step
-    (0 when priming); h: the half kick; (c1p, c2p): the adaptive damping factors; tload: the
-    time of the positions [s] for actor loads.
+    The arrays are the Bodies' (load: the actor table); gravity (3,) and damping (local lambda,
+    viscous alpha) the Params'; sw: switches (gravity, local, viscous, energy, rotate, rigid,
+    planar, adaptive); dt: the contact step (0 when priming); h: the half kick; cc: the adaptive
+    damping factors (c1, c2); tload: the time of the positions [s] for actor loads. (At most 30
+    arguments: CPython passes more as *args, which numba cannot inline.)
     """
     use_gravity, use_local, use_visc, energy, rotate_body, rigid, planar, adaptive = sw
-    v = bd.v
-    w = bd.w
-    L = bd.L
-    fl = bd.flags[b]
+    local, visc = damping
+    c1p, c2p = cc
+    fl = bflags[b]
     damped = fl & LOADED == 0  # a loading device takes its prescribed force undamped
-    m = bd.mass[b]
-    ii = 0.0 if rigid else bd.inert[b, 0]
+    m = mass[b]
+    ii = 0.0 if rigid else inert[b, 0]
     fx, fy, fz, tx, ty, tz, p = body_loads(
         fx, fy, fz, tx, ty, tz, m, ii, v[b, 0], v[b, 1], v[b, 2], w[b, 0], w[b, 1], w[b, 2],
-        par.gravity, par.local, par.visc, use_gravity, use_local and damped, use_visc and damped and not rigid)
+        gravity, local, visc, use_gravity, use_local and damped, use_visc and damped and not rigid)
     if use_visc and damped and rigid:
         # F = -alpha m v, T = -alpha I omega = -alpha L
-        visc = par.visc
         am = visc * m
         fx -= am * v[b, 0]
         fy -= am * v[b, 1]
@@ -267,29 +272,24 @@ def finish_body(b, fx, fy, fz, tx, ty, tz, bd, par, sw, dt, h, c1p, c2p, alpha, 
     if energy:
         ebody[b] += p * dt
     if fl & LOADED:
-        load = bd.load
         arg = load[b, L_OMEGA] * max(tload - load[b, L_T0], 0.0) + load[b, L_PHASE]
         sn = math.sin(arg)
         fx += load[b, L_F0] + load[b, L_F1] * sn
         fy += load[b, L_F0 + 1] + load[b, L_F1 + 1] * sn
         fz += load[b, L_F0 + 2] + load[b, L_F1 + 2] * sn
     if store:
-        f = bd.f
         f[b, 0] = fx
         f[b, 1] = fy
         f[b, 2] = fz
         if rotate_body:
-            tq = bd.tq
             tq[b, 0] = tx
             tq[b, 1] = ty
             tq[b, 2] = tz
     c1 = c1p if damped else 1.0
     c2 = c2p if damped else 1.0
-    et, er0, er1 = kick(b, fl, v, w, L, bd.inert, m, fx, fy, fz, tx, ty, tz, h, c1, c2, rotate_body, rigid, planar,
+    et, er0, er1 = kick(b, fl, v, w, L, inert, m, fx, fy, fz, tx, ty, tz, h, c1, c2, rotate_body, rigid, planar,
                         adaptive)
     if rigid and rotate_body and fl & FIX_ROTATION == 0:
-        q = bd.q
-        inert = bd.inert
         wx, wy, wz = omega_from_L(q[b, 0], q[b, 1], q[b, 2], q[b, 3], L[b, 0], L[b, 1], L[b, 2],
                                   inert[b, 0], inert[b, 1], inert[b, 2])
         w[b, 0] = wx

@@ -258,6 +258,11 @@ def scene_check(cfg, case, k, scene, report):
             report("bonds", msg)
         else:
             report("", f"{spec.declared_by} (effect {spec.name}) {msg}")
+    if shapes == ("polyhedra",):
+        for k, w in enumerate(cfg.get("walls", ())):
+            if w.type == "cylinder":
+                report(f"walls.{k}.type", "is not for polyhedra: their wall contact is the overlap with a "
+                       "half-space (plane and box walls)", w.type)
 
 
 def stage_effects(cfg, dimension, bonded):

@@ -157,6 +157,9 @@ SPECIFIC = {  # faults of one case's stages: order, cross-stage rules, memory
         ("library-before-gradation", lambda d: d["stages"].insert(0, d["stages"].pop(1))),
         ("no-library", lambda d: d["stages"].pop(1)),
         ("rolling-on-polyhedra", lambda d: _stage(d, "deposit")["physics"].update(rolling_resistance=True)),
+        ("cylinder-wall-on-polyhedra", lambda d: _stage(d, "deposit")["walls"].append(
+            {"type": "cylinder", "base": [0.15, 0.1, 0], "axis": [0, 0, 1], "radius": "0.1 m", "height": "0.5 m",
+             "material": "steel"})),
         ("planar-ballast", lambda d: d.update(dimension=2)),
         ("no-class-for-library", lambda d: _stage(d, "gradation").update(passing=[10, 20, 30, 40, 79, 95])),
     ],

@@ -3,10 +3,13 @@
 A shape module defines a named tuple class for its geometry arrays and the hooks below as
 numba (``njit``) functions; :func:`register` maps the class to the module. The engine
 (:mod:`demcli.kernels.engine`) calls the stubs here; numba specialises the engine for each
-geometry type and inlines the registered shape's hook (``numba.extending.overload``), so a
-scene compiles only its own shape's passes and pays no dispatch at run time. A hook that
-writes arrays it takes from a tuple must not be inlined into a parallel loop: numba 0.68 loses
-such writes (the engine calls ``wall_contact`` from the gather's prange as a plain call).
+geometry type and calls the registered shape's hook (``numba.extending.overload``), so a
+scene compiles only its own shape's passes and pays no dispatch at run time. Every hook is a
+pass called once per step: it takes the arrays out of the tuples and hands them to its
+parallel loop. Two numba 0.68 traps this avoids: an inlined function that writes arrays taken
+from a tuple inside a prange body loses the writes, and a plain call per body or per contact
+that passes tuples of arrays pays an atomic reference-count update per array (a 6x slowdown
+of the sphere gather when the wall contact was such a call).
 
 Hooks (g: the geometry tuple, bd: Bodies, nl: Contacts, wa: WallArrays; see
 :mod:`demcli.kernels.layout`):
@@ -19,8 +22,9 @@ Hooks (g: the geometry tuple, bd: Bodies, nl: Contacts, wa: WallArrays; see
   are built on (the spheres themselves, or bounding spheres);
 * ``pair_pass(g, bd, nl, prm, law, flags, dt, frow, trow, erow, bonds, bprm, broke)``: the force
   of every listed pair into its own row, the row owner's sums into frow/trow/erow;
-* ``wall_contact(g, bd, i, k, wa, nl, prm, law, flags, dt)``: primitive i on wall contact k,
-  returns (fx, fy, fz, tx, ty, tz, dashpot loss, slip loss) and writes nl.wfc[k];
+* ``wall_pass(g, bd, nl, wa, prm, law, flags, dt)``: every primitive-wall contact k into its own
+  rows: nl.wfc[k] (force on the primitive, servo stiffness, normal force), nl.wtq[k] (torque),
+  nl.wen[k] (dashpot and slip losses, with energy);
 * ``worst_overlap(g, nl, wa)``: (ratio, i, j) for the guard.
 """
 
@@ -68,9 +72,9 @@ def pair_pass(g, bd, nl, prm, law, flags, dt, frow, trow, erow, bonds, bprm, bro
     return getattr(SHAPES[type(g)], "pair_pass")(g, bd, nl, prm, law, flags, dt, frow, trow, erow, bonds, bprm, broke)
 
 
-def wall_contact(g, bd, i, k, wa, nl, prm, law, flags, dt):
-    """The shape's ``wall_contact`` (plain Python: with NUMBA_DISABLE_JIT=1)."""
-    return getattr(SHAPES[type(g)], "wall_contact")(g, bd, i, k, wa, nl, prm, law, flags, dt)
+def wall_pass(g, bd, nl, wa, prm, law, flags, dt):
+    """The shape's ``wall_pass`` (plain Python: with NUMBA_DISABLE_JIT=1)."""
+    return getattr(SHAPES[type(g)], "wall_pass")(g, bd, nl, wa, prm, law, flags, dt)
 
 
 def worst_overlap(g, nl, wa):
@@ -103,10 +107,10 @@ def _pair_pass(g, bd, nl, prm, law, flags, dt, frow, trow, erow, bonds, bprm, br
         g, bd, nl, prm, law, flags, dt, frow, trow, erow, bonds, bprm, broke)
 
 
-@overload(wall_contact)
-def _wall_contact(g, bd, i, k, wa, nl, prm, law, flags, dt):
-    fn = _hook(g, "wall_contact")
-    return lambda g, bd, i, k, wa, nl, prm, law, flags, dt: fn(g, bd, i, k, wa, nl, prm, law, flags, dt)
+@overload(wall_pass)
+def _wall_pass(g, bd, nl, wa, prm, law, flags, dt):
+    fn = _hook(g, "wall_pass")
+    return lambda g, bd, nl, wa, prm, law, flags, dt: fn(g, bd, nl, wa, prm, law, flags, dt)
 
 
 @overload(worst_overlap)

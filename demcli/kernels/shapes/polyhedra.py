@@ -26,7 +26,7 @@ n_in . x <= n_in . p (``plane_overlap``). Actors (bodies nsmall..) stay out of t
 are paired with every body near them (:func:`add_actor_pairs`).
 
 Provides the engine's hooks (:mod:`demcli.kernels.shapes`): ``place`` (world vertices and face
-planes), ``primitives`` (bounding spheres on the centroids), ``pair_pass``, ``wall_contact``,
+planes), ``primitives`` (bounding spheres on the centroids), ``pair_pass``, ``wall_pass``,
 ``worst_overlap`` (depth / bounding radius).
 """
 
@@ -374,77 +374,87 @@ def pair_pass(g, bd, nl, prm, law, flags, dt, frow, trow, erow, bonds, bprm, bro
 
 
 @njit
-def wall_contact(g, bd, b, k, wa, nl, prm, law, flags, dt):
-    """Body b against plane-wall contact k: the overlap with the solid half-space, the
-    volumetric law; writes wfc[k] (force, servo stiffness) and wgeo[k]; returns (force,
-    torque about the centroid, dashpot loss, slip loss) on the body."""
-    friction = flags[F_FRICTION]
-    dashpot = flags[F_DASHPOT]
-    x = bd.x
-    v = bd.v
-    w = bd.w
-    wfc = nl.wfc
-    wgeo = nl.wgeo
-    wft = nl.wft
-    wnormal = wa.normal
-    wpoint = wa.point
-    wv = wa.v
-    kb = g.shape[b]
-    rb = g.rad[b]
-    va = g.wvert[g.bvstart[b]:g.bvstart[b + 1]]
-    na = g.wnorm[g.bfstart[b]:g.bfstart[b + 1]]
-    da = g.woff[g.bfstart[b]:g.bfstart[b + 1]]
-    fsa = g.fvstart[g.face_start[kb]:g.face_start[kb + 1] + 1]
-    offa = g.vertex_start[kb]
-    fverts = g.fverts
-    xb0 = x[b, 0]
-    xb1 = x[b, 1]
-    xb2 = x[b, 2]
-    m = bd.mass[b]
-    wl = nl.wwall[k]
-    wnx = wnormal[wl, 0]
-    wny = wnormal[wl, 1]
-    wnz = wnormal[wl, 2]
-    vol = 0.0
-    gx = gy = gz = sx = sy = sz = 0.0
-    if wa.kind[wl] == 0:  # plane; the registry refuses other kinds for polyhedra
-        wd = wnx * wpoint[wl, 0] + wny * wpoint[wl, 1] + wnz * wpoint[wl, 2]
-        vol, gx, gy, gz, sx, sy, sz = plane_overlap(va, fsa, fverts, offa, na, da, xb0, xb1, xb2, rb,
-                                                    wnx, wny, wnz, wd)
-    if not vol > 0.0:
-        wfc[k, 0] = 0.0
-        wfc[k, 1] = 0.0
-        wfc[k, 2] = 0.0
-        wfc[k, 3] = 0.0
-        wgeo[k, 0] = 0.0
-        wgeo[k, 1] = 0.0
-        wgeo[k, 2] = 0.0
-        if friction:
-            wft[k, 0] = 0.0
-            wft[k, 1] = 0.0
-            wft[k, 2] = 0.0
-        return 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
-    # B = the wall: its "centre" one unit behind the body along the wall normal, so the
-    # normal falls back to n_w if the cross-section vanishes (body wholly in the wall)
-    nx, ny, nz, area, depth = contact_frame(vol, sx, sy, sz, xb0, xb1, xb2, xb0 - wnx, xb1 - wny,
-                                            xb2 - wnz, rb, rb)
-    ax = gx - xb0
-    ay = gy - xb1
-    az = gz - xb2
-    vx = v[b, 0] + w[b, 1] * az - w[b, 2] * ay - wv[wl, 0]
-    vy = v[b, 1] + w[b, 2] * ax - w[b, 0] * az - wv[wl, 1]
-    vz = v[b, 2] + w[b, 0] * ay - w[b, 1] * ax - wv[wl, 2]
-    cfx, cfy, cfz, ed, ef, fel, kserv, kt = _volumetric_law(
-        prm, g.mat[b], wa.material[wl], vol, depth, area, nx, ny, nz, vx, vy, vz, m, dt, wft, k, friction,
-        dashpot)
-    wfc[k, 0] = cfx
-    wfc[k, 1] = cfy
-    wfc[k, 2] = cfz
-    wfc[k, 3] = kserv
-    wgeo[k, 0] = depth
-    wgeo[k, 1] = fel
-    wgeo[k, 2] = kt
-    return cfx, cfy, cfz, ay * cfz - az * cfy, az * cfx - ax * cfz, ax * cfy - ay * cfx, ed, ef
+def wall_pass(g, bd, nl, wa, prm, law, flags, dt):
+    """Every body-plane contact into its own rows: the overlap with the solid half-space, the
+    volumetric law; wfc[k] (force, servo stiffness), wtq[k] (torque about the centroid), wen[k]
+    (dashpot and slip losses, with energy), wgeo[k] (depth, F_N, K_t)."""
+    _wall_forces(nl.wstart, nl.wwall, bd.x, bd.v, bd.w, bd.mass, g.rad, g.mat, g.shape, g.vertex_start,
+                 g.face_start, g.fvstart, g.fverts, g.bvstart, g.bfstart, g.wvert, g.wnorm, g.woff, wa.kind, wa.point,
+                 wa.normal, wa.v, wa.material, prm, dt, flags[F_FRICTION], flags[F_DASHPOT], flags[F_ENERGY], nl.wft,
+                 nl.wfc, nl.wtq, nl.wen, nl.wgeo)
+
+
+@njit(parallel=True)
+def _wall_forces(wstart, wwall, x, v, w, mass, rad, bmat, shape, vertex_start, face_start, fvstart, fverts, bvstart,
+                 bfstart, wvert, wnorm, woff, wkind, wpoint, wnormal, wv, wmat, prm, dt, friction, dashpot, energy,
+                 wft, wfc, wtq, wen, wgeo):
+    """Per body (prange), its plane-wall contacts (rows wstart[b]..wstart[b + 1], race-free)."""
+    for b in prange(wstart.shape[0] - 1):
+        k0 = wstart[b]
+        k1 = wstart[b + 1]
+        if k1 == k0:
+            continue
+        kb = shape[b]
+        rb = rad[b]
+        va = wvert[bvstart[b]:bvstart[b + 1]]
+        na = wnorm[bfstart[b]:bfstart[b + 1]]
+        da = woff[bfstart[b]:bfstart[b + 1]]
+        fsa = fvstart[face_start[kb]:face_start[kb + 1] + 1]
+        offa = vertex_start[kb]
+        xb0 = x[b, 0]
+        xb1 = x[b, 1]
+        xb2 = x[b, 2]
+        m = mass[b]
+        for k in range(k0, k1):
+            wl = wwall[k]
+            wnx = wnormal[wl, 0]
+            wny = wnormal[wl, 1]
+            wnz = wnormal[wl, 2]
+            vol = 0.0
+            gx = gy = gz = sx = sy = sz = 0.0
+            if wkind[wl] == 0:  # plane; the registry refuses other kinds for polyhedra
+                wd = wnx * wpoint[wl, 0] + wny * wpoint[wl, 1] + wnz * wpoint[wl, 2]
+                vol, gx, gy, gz, sx, sy, sz = plane_overlap(va, fsa, fverts, offa, na, da, xb0, xb1, xb2, rb,
+                                                            wnx, wny, wnz, wd)
+            if not vol > 0.0:
+                for col in range(4):
+                    wfc[k, col] = 0.0
+                for col in range(3):
+                    wtq[k, col] = 0.0
+                    wgeo[k, col] = 0.0
+                if energy:
+                    wen[k, 0] = 0.0
+                    wen[k, 1] = 0.0
+                if friction:
+                    wft[k, 0] = 0.0
+                    wft[k, 1] = 0.0
+                    wft[k, 2] = 0.0
+                continue
+            # B = the wall: its "centre" one unit behind the body along the wall normal, so the
+            # normal falls back to n_w if the cross-section vanishes (body wholly in the wall)
+            nx, ny, nz, area, depth = contact_frame(vol, sx, sy, sz, xb0, xb1, xb2, xb0 - wnx, xb1 - wny,
+                                                    xb2 - wnz, rb, rb)
+            ax = gx - xb0
+            ay = gy - xb1
+            az = gz - xb2
+            vx = v[b, 0] + w[b, 1] * az - w[b, 2] * ay - wv[wl, 0]
+            vy = v[b, 1] + w[b, 2] * ax - w[b, 0] * az - wv[wl, 1]
+            vz = v[b, 2] + w[b, 0] * ay - w[b, 1] * ax - wv[wl, 2]
+            cfx, cfy, cfz, ed, ef, fel, kserv, kt = _volumetric_law(
+                prm, bmat[b], wmat[wl], vol, depth, area, nx, ny, nz, vx, vy, vz, m, dt, wft, k, friction, dashpot)
+            wfc[k, 0] = cfx
+            wfc[k, 1] = cfy
+            wfc[k, 2] = cfz
+            wfc[k, 3] = kserv
+            wtq[k, 0] = ay * cfz - az * cfy
+            wtq[k, 1] = az * cfx - ax * cfz
+            wtq[k, 2] = ax * cfy - ay * cfx
+            wgeo[k, 0] = depth
+            wgeo[k, 1] = fel
+            wgeo[k, 2] = kt
+            if energy:
+                wen[k, 0] = ed
+                wen[k, 1] = ef
 
 
 @njit

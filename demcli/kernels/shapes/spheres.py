@@ -7,7 +7,7 @@ along n = (x_i - x_j) / |x_i - x_j|, contact point at the middle of the overlap;
 
 Provides the engine's hooks (:mod:`demcli.kernels.shapes`): ``place`` (clump members follow
 their body), ``primitives`` (the spheres the lists are built on), ``pair_pass`` (sphere pairs,
-then bonds), ``wall_contact`` (sphere-wall, planes and cylinders), ``worst_overlap`` (the guard).
+then bonds), ``wall_pass`` (sphere-wall, planes and cylinders), ``worst_overlap`` (the guard).
 """
 
 import math
@@ -226,19 +226,33 @@ def pair_pass(g, bd, nl, prm, law, flags, dt, frow, trow, erow, bonds, bprm, bro
 
 
 @njit
-def wall_contact(g, bd, i, k, wa, nl, prm, law, flags, dt):
-    """Sphere i against wall contact k: writes wfc[k] (force, servo stiffness, normal force);
-    returns (force, torque, dashpot loss, slip loss) on the sphere."""
-    wfx, wfy, wfz, wtx, wty, wtz, ed, ef, kn, wfn = _wall_contact(
-        i, k, nl.wwall[k], g.xs, g.vs, g.ws, g.rad, g.mat, g.smass, wa.kind, wa.point, wa.normal, wa.radius, wa.v,
-        wa.material, prm, law, dt, nl.wft, nl.wmr, flags[F_FRICTION], flags[F_ROLLING])
-    wfc = nl.wfc
-    wfc[k, 0] = wfx
-    wfc[k, 1] = wfy
-    wfc[k, 2] = wfz
-    wfc[k, 3] = kn
-    wfc[k, 4] = wfn
-    return wfx, wfy, wfz, wtx, wty, wtz, ed, ef
+def wall_pass(g, bd, nl, wa, prm, law, flags, dt):
+    """Every sphere-wall contact into its own rows: wfc[k] (force on the sphere, servo stiffness,
+    normal force), wtq[k] (torque), wen[k] (dashpot and slip losses, with energy)."""
+    _wall_forces(nl.wprim, nl.wwall, g.xs, g.vs, g.ws, g.rad, g.mat, g.smass, wa.kind, wa.point, wa.normal,
+                 wa.radius, wa.v, wa.material, prm, law, dt, nl.wft, nl.wmr, flags[F_FRICTION], flags[F_ROLLING],
+                 flags[F_ENERGY], nl.wfc, nl.wtq, nl.wen)
+
+
+@njit(parallel=True)
+def _wall_forces(wprim, wwall, xs, vs, ws, rad, smat, smass, wkind, wpoint, wnormal, wradius, wv, wmat, prm, law,
+                 dt, wft, wmr, friction, rolling, energy, wfc, wtq, wen):
+    """Every sphere-wall contact k (prange over contacts: each writes its own rows)."""
+    for k in prange(wprim.shape[0]):
+        wfx, wfy, wfz, wtx, wty, wtz, ed, ef, kn, wfn = _wall_contact(
+            wprim[k], k, wwall[k], xs, vs, ws, rad, smat, smass, wkind, wpoint, wnormal, wradius, wv, wmat, prm, law,
+            dt, wft, wmr, friction, rolling)
+        wfc[k, 0] = wfx
+        wfc[k, 1] = wfy
+        wfc[k, 2] = wfz
+        wfc[k, 3] = kn
+        wfc[k, 4] = wfn
+        wtq[k, 0] = wtx
+        wtq[k, 1] = wty
+        wtq[k, 2] = wtz
+        if energy:
+            wen[k, 0] = ed
+            wen[k, 1] = ef
 
 
 @njit
