@@ -95,7 +95,7 @@ def rebuild_lists(g, bd, nl, par, flags, wa, bonds, bprm, vol, pair_torque):
         wen = np.zeros((nq if flags[F_ENERGY] else 0, 2))
         wgeo = np.zeros((nq if vol else 0, 3))
         nl.wref[:, :] = 0.0
-    return Contacts(nstart, npi, npj, rstart, rlist, nft, nmr, np.zeros((npair, 3)),
+    return Contacts(nstart, npi, npj, rstart, rlist, nft, nmr, np.empty((npair, 3)),  # fc: read where act only
                     np.zeros((npair if pair_torque else 0, 3)), act,
                     np.zeros((npair if flags[F_ENERGY] else 0, 2)), np.zeros((npair if vol else 0, 3)),
                     np.zeros(npair if vol else 0, np.int32), np.zeros((npair if vol else 0, 3)),
@@ -183,12 +183,12 @@ def gather(bd, mb, nl, par, flags, sw, gs, dt, frow, trow, erow, esph, ebody, ea
             ts[i, 1] = ty
             ts[i, 2] = tz
             continue
-        fx, fy, fz, tx, ty, tz = M.finish_body(i, fx, fy, fz, tx, ty, tz, v, w, L, q, inert, mass, bflags, f, tq, load,
-                                               gravity, damping, sw, dt, h, cc, alpha, tload, not fuse_next, ebody,
-                                               eabs, kevec)
+        fx, fy, fz, tx, ty, tz, im, iv = M.finish_body(i, fx, fy, fz, tx, ty, tz, v, w, L, q, inert, mass, bflags, f, tq, load,
+                                                       gravity, damping, sw, dt, h, cc, alpha, tload, not fuse_next,
+                                                       ebody, eabs, kevec)
         if fuse_next:  # the next step's first half kick and drift
-            M.kick(i, bflags[i], v, w, L, inert, mass[i], fx, fy, fz, tx, ty, tz, h, 1.0, 1.0, rotate_body, False,
-                   planar, False)
+            M.kick(i, bflags[i], v, w, L, inert, mass[i], im, iv, fx, fy, fz, tx, ty, tz, h, 1.0, 1.0, rotate_body,
+                   False, planar, False)
             M.drift(x, v, i, dt, xref, lim2, rebuild)
 
 

@@ -96,9 +96,10 @@ def drift(x, v, i, dt, xref, lim2, rebuild):
 
 
 @njit(inline="always")
-def kick(b, fl, v, w, L, inert, m, fx, fy, fz, tx, ty, tz, h, c1, c2, rotate_body, rigid, planar, adaptive):
+def kick(b, fl, v, w, L, inert, m, im, iv, fx, fy, fz, tx, ty, tz, h, c1, c2, rotate_body, rigid, planar, adaptive):
     """Half kick of body b: v, and omega (spin rotor) or L (rigid rotor; omega is left to the
-    caller, who rotates or recomputes it). With ``adaptive`` the damped form (c1, c2) and the
+    caller, who rotates or recomputes it). im = h / m, iv = h / I (spin rotors): computed once
+    by the caller for both kicks of a fused step (a division costs more than the kick). With ``adaptive`` the damped form (c1, c2) and the
     energy measures of the adaptive damping (m sum ((v0 + v1)/2)^2, the rotational omega.L before
     the kick, and for spin rotors after it) are returned; zeros otherwise (c1 = c2 = 1: the plain
     kick, the same numbers)."""
@@ -106,7 +107,6 @@ def kick(b, fl, v, w, L, inert, m, fx, fy, fz, tx, ty, tz, h, c1, c2, rotate_bod
     er0 = 0.0
     er1 = 0.0
     if fl & FIX_TRANSLATION == 0:
-        im = h / m
         if adaptive or fl & FIX_XYZ:
             s = 0.0
             for d in range(3):
@@ -137,7 +137,6 @@ def kick(b, fl, v, w, L, inert, m, fx, fy, fz, tx, ty, tz, h, c1, c2, rotate_bod
                 L[b, 1] = 0.0
         else:
             ii = inert[b, 0]
-            iv = h / ii
             if adaptive:
                 er0 = ii * (w[b, 0] ** 2 + w[b, 1] ** 2 + w[b, 2] ** 2)
                 w[b, 0] = (w[b, 0] * c1 + tx * iv) * c2
@@ -176,7 +175,9 @@ def kick_drift(x, v, w, q, L, f, tq, mass, inert, bflags, dt, alpha, rotate_body
         if fl & LOADED:
             c1 = 1.0
             c2 = 1.0
-        et, er0, er1 = kick(b, fl, v, w, L, inert, mass[b], f[b, 0], f[b, 1], f[b, 2], tq[b, 0], tq[b, 1],
+        im = h / mass[b]
+        iv = h / inert[b, 0] if rotate_body and not rigid else 0.0
+        et, er0, er1 = kick(b, fl, v, w, L, inert, mass[b], im, iv, f[b, 0], f[b, 1], f[b, 2], tq[b, 0], tq[b, 1],
                             tq[b, 2], h, c1, c2, rotate_body, rigid, planar, adaptive)
         if rigid and rotate_body and fl & FIX_ROTATION == 0:
             rotate(b, w, q, L, inert, dt)
@@ -240,7 +241,8 @@ def finish_body(b, fx, fy, fz, tx, ty, tz, v, w, L, q, inert, mass, bflags, f, t
                 dt, h, cc, alpha, tload, store, ebody, eabs, kevec):
     """Second half of a step for body b with its contact loads (fx..tz): body loads (gravity,
     damping, actor force), the loads kept in f/tq when ``store``, the second half kick (rigid
-    rotors: omega from the kicked L), losses booked. Returns the total loads.
+    rotors: omega from the kicked L), losses booked. Returns the total loads and the kick's
+    h / m, h / I (for a fused next kick).
 
     The arrays are the Bodies' (load: the actor table); gravity (3,) and damping (local lambda,
     viscous alpha) the Params'; sw: switches (gravity, local, viscous, energy, rotate, rigid,
@@ -287,8 +289,10 @@ def finish_body(b, fx, fy, fz, tx, ty, tz, v, w, L, q, inert, mass, bflags, f, t
             tq[b, 2] = tz
     c1 = c1p if damped else 1.0
     c2 = c2p if damped else 1.0
-    et, er0, er1 = kick(b, fl, v, w, L, inert, m, fx, fy, fz, tx, ty, tz, h, c1, c2, rotate_body, rigid, planar,
-                        adaptive)
+    im = h / m
+    iv = h / ii if rotate_body and not rigid else 0.0
+    et, er0, er1 = kick(b, fl, v, w, L, inert, m, im, iv, fx, fy, fz, tx, ty, tz, h, c1, c2, rotate_body, rigid,
+                        planar, adaptive)
     if rigid and rotate_body and fl & FIX_ROTATION == 0:
         wx, wy, wz = omega_from_L(q[b, 0], q[b, 1], q[b, 2], q[b, 3], L[b, 0], L[b, 1], L[b, 2],
                                   inert[b, 0], inert[b, 1], inert[b, 2])
@@ -303,7 +307,7 @@ def finish_body(b, fx, fy, fz, tx, ty, tz, v, w, L, q, inert, mass, bflags, f, t
             ea += 0.5 * (er0 + er1)
             eabs[b] += alpha * h * ea
         kevec[b] = kinetic_energy(b, v, w, L, m, ii, rigid)
-    return fx, fy, fz, tx, ty, tz
+    return fx, fy, fz, tx, ty, tz, im, iv
 
 
 @njit(inline="always")
