@@ -75,7 +75,7 @@ def test_declared_effects_follow_the_physics_section():
     ("rolling_resistance", "polyhedra", "physics.rolling_resistance", "polyhedra resist rolling by their faces"),
     ("contact_damping", "spheres", "physics.contact_damping", "restitution dashpot always"),
     ("contact_damping", "clumps", "physics.contact_damping", "restitution dashpot always"),
-    ("planar", "polyhedra", "dimension: 2 (effect planar)", "polygon engine"),
+    ("planar", "polyhedra", "dimension: 2 (effect planar)", "made of disks"),
     ("bonds", "polyhedra", "bonds (effect bonds)", "sphere radii and centre lines"),
 ])
 def test_an_effect_on_a_shape_it_does_not_support_is_refused_with_the_reason(effect, shape, where, reason):
