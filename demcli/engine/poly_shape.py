@@ -23,8 +23,9 @@ import numpy as np
 
 from demcli.engine.bonds import BondSet
 from demcli.engine.materials import damping_ratio
-from demcli.engine.sphere_shape import _EMPTY_I, _empty2, contacts_tuple, stored_contacts
+from demcli.engine.sphere_shape import _empty2, contacts_tuple, stored_contacts
 from demcli.kernels import layout as K
+from demcli.kernels.bonds import N_BTABLE
 from demcli.kernels.walls import PLANE
 
 # bounding radius = template circumradius x (1 + BOUND_PAD): round-off of the world transform
@@ -199,7 +200,6 @@ class PolyShape:
         s.rad = np.ascontiguousarray(np.asarray(sh["radius"], np.float64)[s.shape] * (1.0 + BOUND_PAD))
         s.xs = s.x  # the bodies are the particles: the dem stage measures the scene through xs
         s.bonds = BondSet.empty(0)
-        s._bond_arrays = s.bonds.kernel_arrays()
 
     @staticmethod
     def body_of_primitive(s):
@@ -216,11 +216,13 @@ class PolyShape:
 
     @staticmethod
     def members(s):
-        return K.Members(np.zeros(1, np.int64), _EMPTY_I, _empty2(3), _empty2(3), _empty2(3))
+        """None: every polyhedron is its own primitive (no member pass is compiled)."""
+        return None
 
     @staticmethod
     def bond_arrays(s):
-        return s._bond_arrays, s.bonds.kernel_table(s.dt)
+        """No bonds between polyhedra: (None, an empty model table)."""
+        return None, _empty2(N_BTABLE)
 
     @staticmethod
     def after_advance(s):

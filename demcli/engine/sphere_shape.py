@@ -14,6 +14,7 @@ import numpy as np
 
 from demcli.engine.materials import LAWS, critical_time_step, pair_table
 from demcli.kernels import layout as K
+from demcli.kernels.bonds import N_BTABLE
 
 _EMPTY_I = np.empty(0, np.int64)
 
@@ -122,12 +123,14 @@ class SphereShape:
 
     @staticmethod
     def members(s):
-        if s.clumps:
-            return K.Members(s.mstart, s.mlist, s.xs, s.fs, s.ts)
-        return K.Members(s.mstart, s.mlist, _empty2(3), _empty2(3), _empty2(3))
+        """Members of clumps; None for single spheres (the engine compiles no member pass)."""
+        return K.Members(s.mstart, s.mlist, s.xs, s.fs, s.ts) if s.clumps else None
 
     def bond_arrays(self, s):
-        """(bond state tuple, bond-model table for the current dt) (cached on dt)."""
+        """(bond state tuple, bond-model table for the current dt) (cached on dt); the tuple is
+        None when the bonds effect is off (the engine then compiles no bond pass)."""
+        if not s.flags[K.F_BONDS]:
+            return None, _empty2(N_BTABLE)
         self._replacing = s.bonds.replacing()
         key = (s.dt, s.bonds.prm.tobytes())
         if getattr(self, "_bond_table_key", None) != key:

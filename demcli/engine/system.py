@@ -112,6 +112,17 @@ def is_polyhedral(groups):
     return len(groups.get("polyhedra", {}).get("shape", ())) > 0
 
 
+def shape_plugin(groups):
+    """The shape plug-in class of a state: MixedShape (spheres and polyhedra), PolyShape or SphereShape."""
+    from demcli.engine.mixed_shape import MixedShape, is_mixed
+    from demcli.engine.poly_shape import PolyShape
+    from demcli.engine.sphere_shape import SphereShape
+
+    if is_mixed(groups):
+        return MixedShape
+    return PolyShape if is_polyhedral(groups) else SphereShape
+
+
 class System:
     """Arrays and kernels of one stage, for any body shape.
 
@@ -142,9 +153,6 @@ class System:
 
     def __init__(self, groups, materials, model, plan, walls, dynamics, dt, time=0.0, step=0, mass_scale=1.0,
                  contact_damping=None, adaptive_damping=None, alpha0=ALPHA0, alpha_bounds=(1e-3, 1.0)):
-        from demcli.engine.poly_shape import PolyShape
-        from demcli.engine.sphere_shape import SphereShape
-
         self.plan = plan
         self.materials = list(materials)
         self.model = model
@@ -177,7 +185,7 @@ class System:
         self.tq = np.ascontiguousarray(b.get("torque", np.zeros((nb, 3))), np.float64).copy()
         self._angmom = b.get("angmom")
         self._setup_walls(walls)
-        self.plugin = (PolyShape if is_polyhedral(groups) else SphereShape)(self, groups)
+        self.plugin = shape_plugin(groups)(self, groups)
         n_prim = len(self.rad)
         self._actors = {k: np.asarray(val) for k, val in groups.get("actors", {}).items()}
         self.bload, self.nsmall = actor_loads(self._actors, self.plugin.body_of_primitive(self), nb)

@@ -462,6 +462,33 @@ def bond_gather(brstart, brlist, bfc, btj, bed, frow, trow, erow, energy):
 
 
 @njit
+def bond_forces(bonds, bprm, xs, vs, ws, rad, smat, smass, prm, law, dt, friction, rolling, energy, frow, trow,
+                erow, broke):
+    """The bonds' forces into the pair pass's row sums (:func:`bond_pass`, :func:`bond_gather`).
+
+    ``bonds``: the bond state tuple (bstart, bj, brstart, brlist, model, state, hist, bfc, btj,
+    bed), or None for a scene without bonds: numba prunes the branch on the argument's type,
+    so such a scene compiles none of the bond passes."""
+    if bonds is None:
+        return
+    bstart, bj, brstart, brlist, bmodel, bstate, bhist, bfc, btj, bed = bonds
+    if not (friction or rolling):
+        trow[:, :] = 0.0
+    bond_pass(bstart, bj, bmodel, bstate, bhist, bprm, xs, vs, ws, rad, smat, smass, prm, law, dt,
+              friction, rolling, bfc, btj, bed, frow, trow, erow, energy, broke)
+    bond_gather(brstart, brlist, bfc, btj, bed, frow, trow, erow, energy)
+
+
+@njit
+def unbonded_pairs(bonds, bprm, start, pi, pj):
+    """:func:`drop_bonded` with the bond state tuple; the list unchanged without bonds (None:
+    compiled out, as in :func:`bond_forces`)."""
+    if bonds is None:
+        return start, pi, pj
+    return drop_bonded(start, pi, pj, bonds[0], bonds[1], bonds[4], bonds[5], bonds[6], bprm)
+
+
+@njit
 def drop_bonded(start, pi, pj, bstart, bj, bmodel, bstate, bhist, bprm):
     """The pair list without the pairs a bond replaces (:func:`replaces_contact`: intact
     contact and Burgers bonds, seated broken contact bonds).

@@ -27,18 +27,19 @@ from the effect registry; their arrays have zero rows when off.
 """
 
 import numpy as np
-from numba import prange
+from numba import prange, types
+from numba.extending import overload
 
 from demcli.jit import njit
 from demcli.kernels import motion as M
-from demcli.kernels.bonds import drop_bonded
+from demcli.kernels.bonds import unbonded_pairs
 from demcli.kernels.layout import (BAD_ENERGY, BAD_NUMBER, BAD_OVERLAP, C_BODY, C_BONDS, C_CHECK, C_DAMPING,
                                    C_ENERGY, C_FRICTION, C_GATHER, C_GRAVITY, C_KICK, C_MEMBERS, C_PAIRS,
                                    C_REBUILD, C_ROLLING, C_WALLCTRL, C_WALLMOVE, Contacts, F_ADAPTIVE, F_BONDS,
                                    F_CLUMPS, F_ENERGY, F_FRICTION, F_GRAVITY, F_LOCAL, F_PLANAR, F_ROLLING,
                                    F_VISCOUS, OK)
 from demcli.kernels.neighbors import add_actor_pairs, build_pairs, build_reverse, build_wall_pairs, carry_history
-from demcli.kernels.shapes import pair_pass, place, primitives, volumetric, wall_pass, worst_overlap
+from demcli.kernels.shapes import pair_pass, place, primitives, spin_rotors, volumetric, wall_pass, worst_overlap
 
 
 @njit
@@ -68,9 +69,7 @@ def rebuild_lists(g, bd, nl, par, flags, wa, bonds, bprm, vol, pair_torque):
         nstart, npi, npj = add_actor_pairs(nstart, npj, xs, rad, prim_body, nsmall, skin)
     else:
         nstart, npi, npj = build_pairs(xs, rad, prim_body, skin, par.max_cells)
-    if flags[F_BONDS]:
-        bstart, bj, brstart, brlist, bmodel, bstate, bhist, bfc, btj, bed = bonds
-        nstart, npi, npj = drop_bonded(nstart, npi, npj, bstart, bj, bmodel, bstate, bhist, bprm)
+    nstart, npi, npj = unbonded_pairs(bonds, bprm, nstart, npi, npj)
     npair = npi.shape[0]
     nft = np.zeros((npair if friction else 0, 3))
     nmr = np.zeros((npair if rolling else 0, 3))
@@ -103,16 +102,19 @@ def rebuild_lists(g, bd, nl, par, flags, wa, bonds, bprm, vol, pair_torque):
 
 
 @njit(parallel=True)
-def gather(bd, mb, nl, par, flags, sw, gs, dt, frow, trow, erow, esph, ebody, eabs, kevec, alpha, tload, xref, lim2,
-           rebuild):
-    """Per primitive: its own row sums, the j sides of its pairs, its wall contacts; a primitive
-    that is its own body then finishes the step (motion.finish_body), and with ``fuse_next``
-    takes the next step's first half kick and drift (the same arithmetic as kick_drift);
-    clump members keep their loads in mb.fs / mb.ts for :func:`member_loads`.
+def gather(bd, L, fs, ts, nl, par, flags, sw, gs, dt, frow, trow, erow, esph, ebody, eabs, kevec, alpha, tload,
+           fxref, lim2, rebuild):
+    """Per primitive: its own row sums, the j sides of its pairs, its wall contacts; clump
+    members keep their loads in fs / ts (Members.fs / .ts) for :func:`member_loads`; a primitive
+    that is its own body (fs None) finishes the step (motion.finish_body) and, for spin rotors
+    (``fxref``: the list's reference positions; None for rigid rotors) with ``fuse_next``, takes
+    the next step's first half kick and drift (the same arithmetic as kick_drift).
 
-    gs: (pair_torque, torque, body_prims, fuse_next); dt: the contact step (0 when priming).
+    L (None for spin rotors, motion.rotors), fs and fxref switch at compile time (numba prunes
+    ``is None`` branches on argument types): a scene compiles only its own path.
+    gs: (pair_torque, torque, fuse_next); dt: the contact step (0 when priming).
     """
-    pair_torque, torque, body_prims, fuse_next = gs
+    pair_torque, torque, fuse_next = gs
     energy = flags[F_ENERGY]
     h = 0.5 * dt
     cc = M.damping_factors(alpha, h)
@@ -127,12 +129,10 @@ def gather(bd, mb, nl, par, flags, sw, gs, dt, frow, trow, erow, esph, ebody, ea
     wtq = nl.wtq
     wen = nl.wen
     rotate_body = sw[4]
-    planar = sw[6]
+    planar = sw[5]
     # arrays taken out of the tuples before the parallel loop (see kernels/shapes/__init__.py)
-    x, v, w, q, L, f, tq, mass, inert, bflags, load = bd
+    x, v, w, q, _, f, tq, mass, inert, bflags, load = bd
     gravity, damping = par.gravity, (par.local, par.visc)
-    fs = mb.fs
-    ts = mb.ts
     for i in prange(frow.shape[0]):
         fx = frow[i, 0]
         fy = frow[i, 1]
@@ -175,7 +175,7 @@ def gather(bd, mb, nl, par, flags, sw, gs, dt, frow, trow, erow, esph, ebody, ea
         if energy:
             esph[i, 0] += 0.5 * e0
             esph[i, 1] += 0.5 * e1
-        if not body_prims:
+        if fs is not None:
             fs[i, 0] = fx
             fs[i, 1] = fy
             fs[i, 2] = fz
@@ -183,13 +183,35 @@ def gather(bd, mb, nl, par, flags, sw, gs, dt, frow, trow, erow, esph, ebody, ea
             ts[i, 1] = ty
             ts[i, 2] = tz
             continue
-        fx, fy, fz, tx, ty, tz, im, iv = M.finish_body(i, fx, fy, fz, tx, ty, tz, v, w, L, q, inert, mass, bflags, f, tq, load,
-                                                       gravity, damping, sw, dt, h, cc, alpha, tload, not fuse_next,
-                                                       ebody, eabs, kevec)
-        if fuse_next:  # the next step's first half kick and drift
-            M.kick(i, bflags[i], v, w, L, inert, mass[i], im, iv, fx, fy, fz, tx, ty, tz, h, 1.0, 1.0, rotate_body,
-                   False, planar, False)
-            M.drift(x, v, i, dt, xref, lim2, rebuild)
+        fx, fy, fz, tx, ty, tz, im, iv = M.finish_body(i, fx, fy, fz, tx, ty, tz, v, w, L, q, inert, mass, bflags, f,
+                                                       tq, load, gravity, damping, sw, dt, h, cc, alpha, tload,
+                                                       not fuse_next, ebody, eabs, kevec)
+        if fxref is not None:
+            if fuse_next:  # the next step's first half kick and drift
+                M.kick(i, bflags[i], v, w, None, inert, mass[i], im, iv, fx, fy, fz, tx, ty, tz, h, 1.0, 1.0,
+                       rotate_body, planar, False)
+                M.drift(x, v, i, dt, fxref, lim2, rebuild)
+
+
+def member_rows(mb):
+    """(fs, ts): the clump members' load rows; (None, None) without clumps (mb None), decided at
+    compile time (:mod:`demcli.kernels.switch`; plain Python: with NUMBA_DISABLE_JIT=1)."""
+    return (None, None) if mb is None else (mb.fs, mb.ts)
+
+
+@overload(member_rows)
+def _member_rows(mb):
+    if isinstance(mb, types.NoneType):
+        return lambda mb: (None, None)
+    return lambda mb: (mb.fs, mb.ts)
+
+
+@njit
+def finish_members(bd, mb, par, sw, dt, alpha, tload, ebody, eabs, kevec):
+    """:func:`member_loads` for clumps; without clumps (mb None) nothing, compiled out."""
+    if mb is None:
+        return
+    member_loads(bd, mb, par, sw, dt, alpha, tload, ebody, eabs, kevec)
 
 
 @njit(parallel=True)
@@ -228,10 +250,11 @@ def member_loads(bd, mb, par, sw, dt, alpha, tload, ebody, eabs, kevec):
 
 
 @njit
-def check(g, bd, nl, wa, par, rigid, info):
+def check(g, bd, L, nl, wa, par, info):
     """Guards: NaN/Inf in the body state, the shape's worst overlap ratio, runaway kinetic energy.
-    info: (body or primitive i, j or -1 for a wall, worst ratio, kinetic energy)."""
-    ok, ke = M.check_bodies(bd, rigid, info)
+    L: the rotor switch (motion.rotors); info: (body or primitive i, j or -1 for a wall, worst
+    ratio, kinetic energy)."""
+    ok, ke = M.check_bodies(bd, L, info)
     if not ok:
         return BAD_NUMBER
     worst, wi, wj = worst_overlap(g, nl, wa)
@@ -270,10 +293,12 @@ def run_steps(nsteps, time, flags, prm, par, bd, g, mb, wa, nl, bonds, bprm, ada
         flags: (N_FLAGS,) bool tuple of active effects (layout.F_*).
         prm: material-pair table of the shape's contact law.
         par: Params; bd: Bodies (updated in place); g: the shape's geometry tuple;
-        mb: Members (clumps: mstart, mlist, xs, fs, ts; zero rows otherwise); wa: WallArrays;
+        mb: Members (clumps: mstart, mlist, xs, fs, ts) or None (no clumps: member_loads compiles
+            to nothing); wa: WallArrays;
         nl: Contacts, rebuilt here when needed.
         bonds: bond state (bstart, bj, brstart, brlist, model, state, hist, bfc, btj, bed), see
-            :mod:`demcli.kernels.bonds`; bprm: (n_models, N_BPARAMS) bond-model table.
+            :mod:`demcli.kernels.bonds`, or None (no bonds: their passes compile to nothing);
+            bprm: (n_models, N_BPARAMS) bond-model table.
         adamp: (N_ADAMP,) adaptive damping state (motion.A_*), updated in place.
         esph: (n_prim, 2) cumulative contact damping and friction losses [J];
         ebody: (n_b,) cumulative body damping losses [J]; eacc: (1,) wall work [J].
@@ -295,12 +320,13 @@ def run_steps(nsteps, time, flags, prm, par, bd, g, mb, wa, nl, bonds, bprm, ada
     adaptive = flags[F_ADAPTIVE]
     planar = flags[F_PLANAR]
     vol = volumetric(g)
-    rigid = bd.L.shape[0] > 0 and bd.L.shape[0] == bd.x.shape[0]
+    Lr = M.rotors(spin_rotors(g, mb, nl.xref), bd.L)  # None for spin rotors: the rotor switch
+    rigid = Lr is not None
     rotate_body = friction or rolling or bonded or rigid
     pair_torque = friction or rolling or vol
     torque = pair_torque or bonded
     body_prims = not clumps
-    sw = (flags[F_GRAVITY], flags[F_LOCAL], flags[F_VISCOUS], energy, rotate_body, rigid, planar, adaptive)
+    sw = (flags[F_GRAVITY], flags[F_LOCAL], flags[F_VISCOUS], energy, rotate_body, planar, adaptive)
     nb = bd.x.shape[0]
     nw = wa.v.shape[0]
     lim2 = (0.5 * par.skin) ** 2
@@ -309,6 +335,7 @@ def run_steps(nsteps, time, flags, prm, par, bd, g, mb, wa, nl, bonds, bprm, ada
     broke = np.zeros(1, np.int64)
     xs0, _, _ = primitives(g, bd)
     ns = xs0.shape[0]
+    fs, ts = member_rows(mb)
     frow = np.zeros((ns, 3))
     trow = np.zeros((ns if torque else 0, 3))
     erow = np.zeros((ns if energy else 0, 2))
@@ -327,8 +354,8 @@ def run_steps(nsteps, time, flags, prm, par, bd, g, mb, wa, nl, bonds, bprm, ada
         elif drifted:
             drifted = False
         else:
-            M.kick_drift(bd.x, bd.v, bd.w, bd.q, bd.L, bd.f, bd.tq, bd.mass, bd.inert, bd.flags, dt, alpha,
-                         rotate_body, rigid, clumps, planar, adaptive, nl.xref, lim2, rebuild, eabs)
+            M.kick_drift(bd.x, bd.v, bd.w, bd.q, Lr, bd.f, bd.tq, bd.mass, bd.inert, bd.flags, dt, alpha,
+                         rotate_body, clumps, planar, adaptive, nl.xref, lim2, rebuild, eabs)
             counters[C_KICK] += 1
         place(g, bd, flags, nl.xref, lim2, rebuild)
         if clumps:
@@ -352,14 +379,13 @@ def run_steps(nsteps, time, flags, prm, par, bd, g, mb, wa, nl, bonds, bprm, ada
         _count_effects(counters, flags, adaptive)
         if nw > 0:
             wall_pass(g, bd, nl, wa, prm, par.law, flags, h)
-        gather(bd, mb, nl, par, flags, sw, (pair_torque, torque, body_prims, fuse_next), h, frow, trow, erow, esph,
-               ebody, eabs, kevec, alpha, time + h, nl.xref, lim2, rebuild)
+        gather(bd, Lr, fs, ts, nl, par, flags, sw, (pair_torque, torque, fuse_next), h, frow, trow, erow, esph, ebody,
+               eabs, kevec, alpha, time + h, spin_rotors(g, mb, nl.xref), lim2, rebuild)
         counters[C_GATHER] += 1
         if fuse_next:
             drifted = True
             counters[C_KICK] += 1
-        if clumps:
-            member_loads(bd, mb, par, sw, h, alpha, time + h, ebody, eabs, kevec)
+        finish_members(bd, mb, par, sw, h, alpha, time + h, ebody, eabs, kevec)
         if clumps or vol:
             counters[C_BODY] += 1
         if prime:
@@ -380,7 +406,7 @@ def run_steps(nsteps, time, flags, prm, par, bd, g, mb, wa, nl, bonds, bprm, ada
             counters[C_WALLCTRL] += 1
         gstep = step0 + n
         if par.check_every > 0 and (gstep % par.check_every == 0 or gstep == 1):
-            status = check(g, bd, nl, wa, par, rigid, info)
+            status = check(g, bd, Lr, nl, wa, par, info)
             counters[C_CHECK] += 1
             if status != OK:
                 break

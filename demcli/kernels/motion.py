@@ -29,6 +29,7 @@ from numba import prange
 from demcli.jit import njit
 from demcli.kernels import quat
 from demcli.kernels.layout import FIX_ROTATION, FIX_TRANSLATION, FIX_X, FIX_XYZ, LOADED
+from demcli.kernels.switch import choose
 from demcli.kernels.walls import (FORCE, PRESSURE, SERVO, W_AMPLITUDE, W_AREA, W_FREQ, W_GAIN, W_MASS,
                                   W_PHASE, W_RATE, W_START, W_TARGET, W_VMAX, applied_force)
 
@@ -96,9 +97,10 @@ def drift(x, v, i, dt, xref, lim2, rebuild):
 
 
 @njit(inline="always")
-def kick(b, fl, v, w, L, inert, m, im, iv, fx, fy, fz, tx, ty, tz, h, c1, c2, rotate_body, rigid, planar, adaptive):
+def kick(b, fl, v, w, L, inert, m, im, iv, fx, fy, fz, tx, ty, tz, h, c1, c2, rotate_body, planar, adaptive):
     """Half kick of body b: v, and omega (spin rotor) or L (rigid rotor; omega is left to the
-    caller, who rotates or recomputes it). im = h / m, iv = h / I (spin rotors): computed once
+    caller, who rotates or recomputes it). L: the bodies' L (rigid rotors) or None (spin rotors:
+    the switch is the argument's type, see :func:`rotors`). im = h / m, iv = h / I (spin rotors): computed once
     by the caller for both kicks of a fused step (a division costs more than the kick). With ``adaptive`` the damped form (c1, c2) and the
     energy measures of the adaptive damping (m sum ((v0 + v1)/2)^2, the rotational omega.L before
     the kick, and for spin rotors after it) are returned; zeros otherwise (c1 = c2 = 1: the plain
@@ -122,7 +124,7 @@ def kick(b, fl, v, w, L, inert, m, im, iv, fx, fy, fz, tx, ty, tz, h, c1, c2, ro
         if planar:
             v[b, 2] = 0.0
     if rotate_body and fl & FIX_ROTATION == 0:
-        if rigid:
+        if L is not None:
             if adaptive:
                 er0 = w[b, 0] * L[b, 0] + w[b, 1] * L[b, 1] + w[b, 2] * L[b, 2]
                 L[b, 0] = (L[b, 0] * c1 + h * tx) * c2
@@ -153,6 +155,15 @@ def kick(b, fl, v, w, L, inert, m, im, iv, fx, fy, fz, tx, ty, tz, h, c1, c2, ro
     return et, er0, er1
 
 
+@njit
+def rotors(spin, L):
+    """The engine's rotor switch: L for rigid rotors (clumps, polyhedra), None for spin rotors
+    (single spheres), decided by the type of ``spin`` (the shape's ``spin_rotors``: None for
+    rigid rotors). Passed as the ``L`` of the motion kernels: with None, numba prunes their rigid
+    rotor branches at compile time (:mod:`demcli.kernels.switch`)."""
+    return choose(spin, L, None)
+
+
 @njit(inline="always")
 def damping_factors(alpha, h):
     """(c1, c2) of a half kick of length h with the adaptive alpha: (1 - alpha h/2, 1/(1 + alpha h/2))."""
@@ -161,11 +172,12 @@ def damping_factors(alpha, h):
 
 
 @njit(parallel=True)
-def kick_drift(x, v, w, q, L, f, tq, mass, inert, bflags, dt, alpha, rotate_body, rigid, members, planar,
+def kick_drift(x, v, w, q, L, f, tq, mass, inert, bflags, dt, alpha, rotate_body, members, planar,
                adaptive, xref, lim2, rebuild, eabs):
     """First half kick, rotation (rigid rotors) and drift of every body; sets rebuild[0] when a
     body that is its own collision primitive moved > skin/2 (clump members are checked when
-    placed); eabs[b]: the adaptive damping's absorbed energy of this half kick."""
+    placed); eabs[b]: the adaptive damping's absorbed energy of this half kick. L: None for spin
+    rotors (:func:`rotors`)."""
     h = 0.5 * dt
     c1p, c2p = damping_factors(alpha, h)
     for b in prange(x.shape[0]):
@@ -176,13 +188,17 @@ def kick_drift(x, v, w, q, L, f, tq, mass, inert, bflags, dt, alpha, rotate_body
             c1 = 1.0
             c2 = 1.0
         im = h / mass[b]
-        iv = h / inert[b, 0] if rotate_body and not rigid else 0.0
+        iv = 0.0
+        if L is None:
+            if rotate_body:
+                iv = h / inert[b, 0]
         et, er0, er1 = kick(b, fl, v, w, L, inert, mass[b], im, iv, f[b, 0], f[b, 1], f[b, 2], tq[b, 0], tq[b, 1],
-                            tq[b, 2], h, c1, c2, rotate_body, rigid, planar, adaptive)
-        if rigid and rotate_body and fl & FIX_ROTATION == 0:
-            rotate(b, w, q, L, inert, dt)
-            if adaptive:
-                er1 = w[b, 0] * L[b, 0] + w[b, 1] * L[b, 1] + w[b, 2] * L[b, 2]
+                            tq[b, 2], h, c1, c2, rotate_body, planar, adaptive)
+        if L is not None:
+            if rotate_body and fl & FIX_ROTATION == 0:
+                rotate(b, w, q, L, inert, dt)
+                if adaptive:
+                    er1 = w[b, 0] * L[b, 0] + w[b, 1] * L[b, 1] + w[b, 2] * L[b, 2]
         if adaptive and fl & LOADED == 0:
             ea = et
             ea += 0.5 * (er0 + er1)
@@ -245,32 +261,35 @@ def finish_body(b, fx, fy, fz, tx, ty, tz, v, w, L, q, inert, mass, bflags, f, t
     h / m, h / I (for a fused next kick).
 
     The arrays are the Bodies' (load: the actor table); gravity (3,) and damping (local lambda,
-    viscous alpha) the Params'; sw: switches (gravity, local, viscous, energy, rotate, rigid,
-    planar, adaptive); dt: the contact step (0 when priming); h: the half kick; cc: the adaptive
+    viscous alpha) the Params'; L: None for spin rotors (:func:`rotors`); sw: switches (gravity,
+    local, viscous, energy, rotate, planar, adaptive); dt: the contact step (0 when priming); h: the half kick; cc: the adaptive
     damping factors (c1, c2); tload: the time of the positions [s] for actor loads. (At most 30
     arguments: CPython passes more as *args, which numba cannot inline.)
     """
-    use_gravity, use_local, use_visc, energy, rotate_body, rigid, planar, adaptive = sw
+    use_gravity, use_local, use_visc, energy, rotate_body, planar, adaptive = sw
+    rigid = L is not None
     local, visc = damping
     c1p, c2p = cc
     fl = bflags[b]
     damped = fl & LOADED == 0  # a loading device takes its prescribed force undamped
     m = mass[b]
-    ii = 0.0 if rigid else inert[b, 0]
+    ii = 0.0
+    if L is None:
+        ii = inert[b, 0]
     fx, fy, fz, tx, ty, tz, p = body_loads(
         fx, fy, fz, tx, ty, tz, m, ii, v[b, 0], v[b, 1], v[b, 2], w[b, 0], w[b, 1], w[b, 2],
         gravity, local, visc, use_gravity, use_local and damped, use_visc and damped and not rigid)
-    if use_visc and damped and rigid:
-        # F = -alpha m v, T = -alpha I omega = -alpha L
-        am = visc * m
-        fx -= am * v[b, 0]
-        fy -= am * v[b, 1]
-        fz -= am * v[b, 2]
-        tx -= visc * L[b, 0]
-        ty -= visc * L[b, 1]
-        tz -= visc * L[b, 2]
-        p += am * (v[b, 0] ** 2 + v[b, 1] ** 2 + v[b, 2] ** 2) + visc * (
-            w[b, 0] * L[b, 0] + w[b, 1] * L[b, 1] + w[b, 2] * L[b, 2])
+    if L is not None:
+        if use_visc and damped:  # F = -alpha m v, T = -alpha I omega = -alpha L
+            am = visc * m
+            fx -= am * v[b, 0]
+            fy -= am * v[b, 1]
+            fz -= am * v[b, 2]
+            tx -= visc * L[b, 0]
+            ty -= visc * L[b, 1]
+            tz -= visc * L[b, 2]
+            p += am * (v[b, 0] ** 2 + v[b, 1] ** 2 + v[b, 2] ** 2) + visc * (
+                w[b, 0] * L[b, 0] + w[b, 1] * L[b, 1] + w[b, 2] * L[b, 2])
     if energy:
         ebody[b] += p * dt
     if fl & LOADED:
@@ -290,10 +309,13 @@ def finish_body(b, fx, fy, fz, tx, ty, tz, v, w, L, q, inert, mass, bflags, f, t
     c1 = c1p if damped else 1.0
     c2 = c2p if damped else 1.0
     im = h / m
-    iv = h / ii if rotate_body and not rigid else 0.0
-    et, er0, er1 = kick(b, fl, v, w, L, inert, m, im, iv, fx, fy, fz, tx, ty, tz, h, c1, c2, rotate_body, rigid,
-                        planar, adaptive)
-    if rigid and rotate_body and fl & FIX_ROTATION == 0:
+    iv = 0.0
+    if L is None:
+        if rotate_body:
+            iv = h / ii
+    et, er0, er1 = kick(b, fl, v, w, L, inert, m, im, iv, fx, fy, fz, tx, ty, tz, h, c1, c2, rotate_body, planar,
+                        adaptive)
+    if L is not None and rotate_body and fl & FIX_ROTATION == 0:
         wx, wy, wz = omega_from_L(q[b, 0], q[b, 1], q[b, 2], q[b, 3], L[b, 0], L[b, 1], L[b, 2],
                                   inert[b, 0], inert[b, 1], inert[b, 2])
         w[b, 0] = wx
@@ -306,14 +328,15 @@ def finish_body(b, fx, fy, fz, tx, ty, tz, v, w, L, q, inert, mass, bflags, f, t
             ea = et
             ea += 0.5 * (er0 + er1)
             eabs[b] += alpha * h * ea
-        kevec[b] = kinetic_energy(b, v, w, L, m, ii, rigid)
+        kevec[b] = kinetic_energy(b, v, w, L, m, ii)
     return fx, fy, fz, tx, ty, tz, im, iv
 
 
 @njit(inline="always")
-def kinetic_energy(b, v, w, L, m, ii, rigid):
-    """Kinetic energy of body b [J]: m v^2/2 + omega.L/2 (rigid) or ii omega^2/2 (spin)."""
-    if rigid:
+def kinetic_energy(b, v, w, L, m, ii):
+    """Kinetic energy of body b [J]: m v^2/2 + omega.L/2 (rigid rotors) or ii omega^2/2 (spin
+    rotors: L None)."""
+    if L is not None:
         return 0.5 * (m * (v[b, 0] ** 2 + v[b, 1] ** 2 + v[b, 2] ** 2)
                       + w[b, 0] * L[b, 0] + w[b, 1] * L[b, 1] + w[b, 2] * L[b, 2])
     return 0.5 * m * (v[b, 0] ** 2 + v[b, 1] ** 2 + v[b, 2] ** 2) + 0.5 * ii * (
@@ -422,18 +445,19 @@ def wall_control(time, dt, nq, wwall, wfc, wnormal, wv, wctrl, wprm, wforce, wkn
 
 
 @njit
-def check_bodies(bd, rigid, info):
-    """Guards on the body state: (finite, kinetic energy [J]); info[0] = the first bad body."""
-    x, v, w, q, L, mass, inert = bd.x, bd.v, bd.w, bd.q, bd.L, bd.mass, bd.inert
+def check_bodies(bd, L, info):
+    """Guards on the body state: (finite, kinetic energy [J]); info[0] = the first bad body.
+    L: the bodies' L, None for spin rotors (:func:`rotors`)."""
+    x, v, w, q, mass, inert = bd.x, bd.v, bd.w, bd.q, bd.mass, bd.inert
     ke = 0.0
     for b in range(x.shape[0]):
         s = 0.0
         for d in range(3):
             s += x[b, d] + v[b, d] + w[b, d]
-        if rigid:
+        if L is not None:
             s += q[b, 0] + q[b, 1] + q[b, 2] + q[b, 3] + L[b, 0] + L[b, 1] + L[b, 2]
         if not math.isfinite(s):
             info[0] = b
             return False, ke
-        ke += kinetic_energy(b, v, w, L, mass[b], 0.0 if rigid else inert[b, 0], rigid)
+        ke += kinetic_energy(b, v, w, L, mass[b], inert[b, 0])
     return True, ke

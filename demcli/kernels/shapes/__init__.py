@@ -25,12 +25,15 @@ Hooks (g: the geometry tuple, bd: Bodies, nl: Contacts, wa: WallArrays; see
 * ``wall_pass(g, bd, nl, wa, prm, law, flags, dt)``: every primitive-wall contact k into its own
   rows: nl.wfc[k] (force on the primitive, servo stiffness, normal force), nl.wtq[k] (torque),
   nl.wen[k] (dashpot and slip losses, with energy);
-* ``worst_overlap(g, nl, wa)``: (ratio, i, j) for the guard.
+* ``worst_overlap(g, nl, wa)``: (ratio, i, j) for the guard;
+* ``spin_rotors(g, mb, xref)``: ``xref`` when every body is one sphere (spin rotors: the gather
+  fuses their next kick and drift), else None; the engine's compile-time switch (numba prunes
+  the fused path from the gather of clumps and polyhedra).
 """
 
 from numba.extending import overload
 
-from demcli.kernels.shapes import polyhedra, spheres
+from demcli.kernels.shapes import mixed, polyhedra, spheres
 
 SHAPES = {}
 
@@ -42,6 +45,7 @@ def register(geometry_class, module):
 
 register(spheres.SphereGeometry, spheres)
 register(polyhedra.PolyGeometry, polyhedra)
+register(mixed.MixedGeometry, mixed)
 
 
 def _hook(g, name):
@@ -82,6 +86,11 @@ def worst_overlap(g, nl, wa):
     return getattr(SHAPES[type(g)], "worst_overlap")(g, nl, wa)
 
 
+def spin_rotors(g, mb, xref):
+    """The shape's ``spin_rotors`` (plain Python: with NUMBA_DISABLE_JIT=1)."""
+    return getattr(SHAPES[type(g)], "spin_rotors")(g, mb, xref)
+
+
 @overload(place)
 def _place(g, bd, flags, xref, lim2, rebuild):
     fn = _hook(g, "place")
@@ -117,3 +126,9 @@ def _wall_pass(g, bd, nl, wa, prm, law, flags, dt):
 def _worst_overlap(g, nl, wa):
     fn = _hook(g, "worst_overlap")
     return lambda g, nl, wa: fn(g, nl, wa)
+
+
+@overload(spin_rotors)
+def _spin_rotors(g, mb, xref):
+    fn = _hook(g, "spin_rotors")
+    return lambda g, mb, xref: fn(g, mb, xref)

@@ -188,8 +188,9 @@ def _still_separated(code, na, da, va, nb_, db_, vb, margin):
 @njit(parallel=True)
 def _pair_forces(start, pj, x, v, w, mass, rad, bmat, prm, sw, dt,
                  shape, vertex_start, face_start, fvstart, fverts, bvstart, bfstart, wvert, wnorm, woff,
-                 ft, fc, tj, act, epair, geo, frow, trow, erow, sep, sdir):
-    """Force of every listed pair into its own row; the row owner i sums its side.
+                 ft, fc, tj, act, epair, geo, frow, trow, erow, sep, sdir, r0):
+    """Force of every listed pair into its own row; the row owner i sums its side; rows from
+    ``r0`` (0; a mixed scene: its polyhedra, :mod:`demcli.kernels.shapes.mixed`).
 
     fc[c]: force on i [N]; tj[c]: torque on j [N m]; geo[c]: (depth, F_N, K_t);
     epair[c]: (dashpot, slip) losses this step [J]; frow/trow/erow[i]: i's sums.
@@ -203,7 +204,7 @@ def _pair_forces(start, pj, x, v, w, mass, rad, bmat, prm, sw, dt,
     # scratch of overlap_ws for any pair of these shapes: largest face, most faces
     max_fv = max_row(fvstart)
     max_f = max_row(face_start)
-    for i in prange(start.shape[0] - 1):
+    for i in prange(r0, start.shape[0] - 1):
         sfx = 0.0
         sfy = 0.0
         sfz = 0.0
@@ -360,6 +361,12 @@ def volumetric(g):
 
 
 @njit
+def spin_rotors(g, mb, xref):
+    """Polyhedra are rigid rotors: None."""
+    return None
+
+
+@njit
 def primitives(g, bd):
     """Bounding spheres centred on the centroids (rotation does not move them)."""
     return bd.x, g.rad, np.arange(bd.x.shape[0])
@@ -370,7 +377,7 @@ def pair_pass(g, bd, nl, prm, law, flags, dt, frow, trow, erow, bonds, bprm, bro
     """Every listed pair's force into its own row (bonds do not join polyhedra)."""
     _pair_forces(nl.start, nl.pj, bd.x, bd.v, bd.w, bd.mass, g.rad, g.mat, prm, flags, dt,
                  g.shape, g.vertex_start, g.face_start, g.fvstart, g.fverts, g.bvstart, g.bfstart, g.wvert, g.wnorm,
-                 g.woff, nl.ft, nl.fc, nl.tj, nl.act, nl.epair, nl.geo, frow, trow, erow, nl.sep, nl.sdir)
+                 g.woff, nl.ft, nl.fc, nl.tj, nl.act, nl.epair, nl.geo, frow, trow, erow, nl.sep, nl.sdir, 0)
 
 
 @njit
@@ -381,15 +388,16 @@ def wall_pass(g, bd, nl, wa, prm, law, flags, dt):
     _wall_forces(nl.wstart, nl.wwall, bd.x, bd.v, bd.w, bd.mass, g.rad, g.mat, g.shape, g.vertex_start,
                  g.face_start, g.fvstart, g.fverts, g.bvstart, g.bfstart, g.wvert, g.wnorm, g.woff, wa.kind, wa.point,
                  wa.normal, wa.v, wa.material, prm, dt, flags[F_FRICTION], flags[F_DASHPOT], flags[F_ENERGY], nl.wft,
-                 nl.wfc, nl.wtq, nl.wen, nl.wgeo)
+                 nl.wfc, nl.wtq, nl.wen, nl.wgeo, 0)
 
 
 @njit(parallel=True)
 def _wall_forces(wstart, wwall, x, v, w, mass, rad, bmat, shape, vertex_start, face_start, fvstart, fverts, bvstart,
                  bfstart, wvert, wnorm, woff, wkind, wpoint, wnormal, wv, wmat, prm, dt, friction, dashpot, energy,
-                 wft, wfc, wtq, wen, wgeo):
-    """Per body (prange), its plane-wall contacts (rows wstart[b]..wstart[b + 1], race-free)."""
-    for b in prange(wstart.shape[0] - 1):
+                 wft, wfc, wtq, wen, wgeo, r0):
+    """Per body (prange), its plane-wall contacts (rows wstart[b]..wstart[b + 1], race-free);
+    bodies from ``r0`` (0; a mixed scene: its polyhedra)."""
+    for b in prange(r0, wstart.shape[0] - 1):
         k0 = wstart[b]
         k1 = wstart[b + 1]
         if k1 == k0:

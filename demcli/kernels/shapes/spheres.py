@@ -17,10 +17,11 @@ from numba import prange
 
 from demcli.jit import njit
 from demcli.kernels import quat
-from demcli.kernels.bonds import bond_gather, bond_pass
+from demcli.kernels.bonds import bond_forces
 from demcli.kernels.contact import (HERTZ, P_CN, P_ESTAR, P_KN, P_ZETA, contact_law, pair_kinematics,
                                    strain_energy)
-from demcli.kernels.layout import F_BONDS, F_CLUMPS, F_ENERGY, F_FRICTION, F_ROLLING
+from demcli.kernels.layout import F_CLUMPS, F_ENERGY, F_FRICTION, F_ROLLING
+from demcli.kernels.switch import choose
 from demcli.kernels.walls import wall_distance
 
 SphereGeometry = namedtuple("SphereGeometry", "xs vs ws rad mat smass sbody soff")
@@ -53,14 +54,19 @@ def _place_members(x, v, w, q, xs, vs, ws, sbody, soff, xref, lim2, rebuild):
 
 @njit(parallel=True)
 def _pair_forces(start, pj, xs, vs, ws, rad, smat, smass, prm, law, dt, ft, mr, friction, rolling,
-                 energy, fc, tj, act, epair, frow, trow, erow):
+                 energy, fc, tj, act, epair, frow, trow, erow, split):
     """Force, torques and dissipation of every listed pair, each pair writing its own row.
 
     Walks the CSR rows (sphere i, then its j > i), so i's data is loaded once per row, and
     the row's owner sums i's side of its pairs into frow/trow/erow[i] (race-free); the
-    gather then adds only the j sides.
+    gather then adds only the j sides. ``split``: None (every primitive a sphere), or the
+    number of spheres of a mixed scene (:mod:`demcli.kernels.shapes.mixed`): rows and partners
+    below it only, and every open pair drops its history (nothing is marked at a rebuild).
     """
-    for i in prange(start.shape[0] - 1):
+    nrow = start.shape[0] - 1
+    if split is not None:
+        nrow = split
+    for i in prange(nrow):
         xi0 = xs[i, 0]
         xi1 = xs[i, 1]
         xi2 = xs[i, 2]
@@ -75,6 +81,9 @@ def _pair_forces(start, pj, xs, vs, ws, rad, smat, smass, prm, law, dt, ft, mr, 
         se1 = 0.0
         for c in range(start[i], start[i + 1]):
             j = pj[c]
+            if split is not None:
+                if j >= split:
+                    continue
             dx = xi0 - xs[j, 0]
             dy = xi1 - xs[j, 1]
             dz = xi2 - xs[j, 2]
@@ -82,7 +91,7 @@ def _pair_forces(start, pj, xs, vs, ws, rad, smat, smass, prm, law, dt, ft, mr, 
             rs = ri + rj
             d2 = dx * dx + dy * dy + dz * dz
             if d2 >= rs * rs:
-                if act[c]:  # a contact that just opened drops its history (most listed pairs never touch)
+                if act[c] or split is not None:  # an opened contact drops its history (most pairs never touch)
                     act[c] = 0
                     if friction:
                         ft[c, 0] = 0.0
@@ -203,6 +212,12 @@ def volumetric(g):
 
 
 @njit
+def spin_rotors(g, mb, xref):
+    """Single spheres (no clump members, mb None) are spin rotors: xref; clumps: None."""
+    return choose(mb, xref, None)
+
+
+@njit
 def primitives(g, bd):
     """The spheres themselves: (positions, radii, body of each)."""
     return g.xs, g.rad, g.sbody
@@ -215,14 +230,9 @@ def pair_pass(g, bd, nl, prm, law, flags, dt, frow, trow, erow, bonds, bprm, bro
     rolling = flags[F_ROLLING]
     energy = flags[F_ENERGY]
     _pair_forces(nl.start, nl.pj, g.xs, g.vs, g.ws, g.rad, g.mat, g.smass, prm, law, dt, nl.ft, nl.mr, friction,
-                 rolling, energy, nl.fc, nl.tj, nl.act, nl.epair, frow, trow, erow)
-    if flags[F_BONDS]:
-        bstart, bj, brstart, brlist, bmodel, bstate, bhist, bfc, btj, bed = bonds
-        if not (friction or rolling):
-            trow[:, :] = 0.0
-        bond_pass(bstart, bj, bmodel, bstate, bhist, bprm, g.xs, g.vs, g.ws, g.rad, g.mat, g.smass, prm, law, dt,
-                  friction, rolling, bfc, btj, bed, frow, trow, erow, energy, broke)
-        bond_gather(brstart, brlist, bfc, btj, bed, frow, trow, erow, energy)
+                 rolling, energy, nl.fc, nl.tj, nl.act, nl.epair, frow, trow, erow, None)
+    bond_forces(bonds, bprm, g.xs, g.vs, g.ws, g.rad, g.mat, g.smass, prm, law, dt, friction, rolling, energy,
+                frow, trow, erow, broke)
 
 
 @njit
@@ -231,14 +241,18 @@ def wall_pass(g, bd, nl, wa, prm, law, flags, dt):
     normal force), wtq[k] (torque), wen[k] (dashpot and slip losses, with energy)."""
     _wall_forces(nl.wprim, nl.wwall, g.xs, g.vs, g.ws, g.rad, g.mat, g.smass, wa.kind, wa.point, wa.normal,
                  wa.radius, wa.v, wa.material, prm, law, dt, nl.wft, nl.wmr, flags[F_FRICTION], flags[F_ROLLING],
-                 flags[F_ENERGY], nl.wfc, nl.wtq, nl.wen)
+                 flags[F_ENERGY], nl.wfc, nl.wtq, nl.wen, None)
 
 
 @njit(parallel=True)
 def _wall_forces(wprim, wwall, xs, vs, ws, rad, smat, smass, wkind, wpoint, wnormal, wradius, wv, wmat, prm, law,
-                 dt, wft, wmr, friction, rolling, energy, wfc, wtq, wen):
-    """Every sphere-wall contact k (prange over contacts: each writes its own rows)."""
+                 dt, wft, wmr, friction, rolling, energy, wfc, wtq, wen, split):
+    """Every sphere-wall contact k (prange over contacts: each writes its own rows); ``split``
+    as in :func:`_pair_forces` (a mixed scene: the contacts of primitives below it only)."""
     for k in prange(wprim.shape[0]):
+        if split is not None:
+            if wprim[k] >= split:
+                continue
         wfx, wfy, wfz, wtx, wty, wtz, ed, ef, kn, wfn = _wall_contact(
             wprim[k], k, wwall[k], xs, vs, ws, rad, smat, smass, wkind, wpoint, wnormal, wradius, wv, wmat, prm, law,
             dt, wft, wmr, friction, rolling)
@@ -303,6 +317,15 @@ def total_strain_energy(pi, pj, xs, rad, smat, prm, law, ft, mr, friction, rolli
         if delta > 0.0:
             e += strain_energy(law, prm, smat[i], smat[j], delta, rad[i] * rad[j] / (rad[i] + rad[j]),
                                ft, mr, c, friction, rolling)
+    return e + wall_strain_energy(xs, rad, smat, prm, law, wstart, wwall, wkind, wpoint, wnormal, wradius, wmat, wft,
+                                  wmr, friction, rolling)
+
+
+@njit
+def wall_strain_energy(xs, rad, smat, prm, law, wstart, wwall, wkind, wpoint, wnormal, wradius, wmat, wft, wmr,
+                       friction, rolling):
+    """Elastic energy in the wall contacts of the spheres 0..len(xs)-1 [J] (serial, fixed order)."""
+    e = 0.0
     for i in range(xs.shape[0]):
         for k in range(wstart[i], wstart[i + 1]):
             wl = wwall[k]

@@ -1,0 +1,234 @@
+"""The mixed shape plug-in of :class:`demcli.engine.system.System`: spheres and polyhedra together.
+
+A state with a non-empty ``spheres`` group and a non-empty ``polyhedra`` group: the sphere
+bodies (single spheres or clumps; ``spheres.body`` < the first polyhedron body) come first,
+the polyhedra last, one row of ``polyhedra`` per polyhedral body in body order (e.g. a
+polyhedral loading plate or sleeper on a bed of spheres or clumps of spheres). Every body is
+a rigid rotor (``bodies.inertia`` (n_b, 3): principal moments; a sphere's three equal). The
+kernels and the contact physics are in :mod:`demcli.kernels.shapes.mixed`: sphere pairs by the
+sphere law of the contact model, polyhedron pairs by the volumetric law, sphere-polyhedron
+pairs by the sphere law at the point contact of the sphere with the polyhedron's nearest
+feature. Walls: planes. Contacts are stored by primitive (sphere primitives first, then one
+per polyhedron) in ``contacts`` (i, j, force on i, depth, ft, mr) and ``wall_contacts``
+(sphere = the primitive, wall, force, depth, ft, mr).
+"""
+
+import math
+from types import SimpleNamespace
+
+import numpy as np
+
+from demcli.engine.bonds import BondSet
+from demcli.engine.materials import LAWS, critical_time_step, pair_table
+from demcli.engine.poly_shape import BOUND_PAD, PolyShape, poly_pair_table
+from demcli.engine.sphere_shape import SphereShape, _empty2, contacts_tuple, stored_contacts
+from demcli.kernels import layout as K
+from demcli.kernels.bonds import N_BTABLE
+from demcli.kernels.walls import PLANE
+
+
+def is_mixed(groups):
+    """Whether the state holds both spheres and polyhedra."""
+    return (len(groups.get("polyhedra", {}).get("shape", ())) > 0
+            and len(groups.get("spheres", {}).get("radius", ())) > 0)
+
+
+def mixed_groups(sphere_groups, poly_groups):
+    """State groups of a scene with the bodies of ``sphere_groups`` (bodies, spheres: single
+    spheres or clumps) followed by those of ``poly_groups`` (bodies, polyhedra,
+    polyhedron_shapes, e.g. from :func:`demcli.engine.poly_shape.polyhedra_groups`). Body ids are
+    renumbered in that order; a sphere body's inertia (n, 1) becomes its three principal moments."""
+    bs, bp = sphere_groups["bodies"], poly_groups["bodies"]
+    ns_b = len(bs["mass"])
+    bodies = {}
+    for key in ("x", "v", "omega", "q", "mass", "flags"):
+        bodies[key] = np.concatenate([np.asarray(bs[key]), np.asarray(bp[key])]).astype(np.asarray(bp[key]).dtype)
+    inert = np.asarray(bs["inertia"], np.float64).reshape(ns_b, -1)
+    bodies["inertia"] = np.concatenate([np.broadcast_to(inert, (ns_b, 3)), np.asarray(bp["inertia"], np.float64)])
+    bodies["id"] = np.arange(len(bodies["mass"]), dtype=np.int64)
+    out = {k: {c: np.asarray(a).copy() for c, a in g.items()} for k, g in poly_groups.items()
+           if k in ("polyhedra", "polyhedron_shapes")}
+    out["bodies"] = bodies
+    out["spheres"] = {c: np.asarray(a).copy() for c, a in sphere_groups["spheres"].items()}
+    return out
+
+
+class MixedShape:
+    """Spheres (single or clumped) and convex polyhedra: the system's primitive arrays (spheres
+    first, then one per polyhedron) and the engine's tuples."""
+
+    name = "mixed"
+    MUTABLE = ("xs", "vs", "ws", "fs", "ts")
+
+    def __init__(self, s, groups):
+        if len(s.walls) and np.any(np.asarray(s.walls.kind) != PLANE):
+            raise ValueError("a scene of spheres and polyhedra supports plane walls only")
+        if s.plan.has("bonds"):
+            raise ValueError("bonds join spheres of a spheres-only scene, not of a scene with polyhedra")
+        s.law = LAWS[s.model.law]
+        s.prm = pair_table(s.materials, s.model)
+        s.qprm = poly_pair_table(s.materials, s.model)
+        sp, ph, sh = groups["spheres"], groups["polyhedra"], groups["polyhedron_shapes"]
+        s._poly_group = {k: np.asarray(val) for k, val in ph.items()}
+        s._shape_group = {k: np.asarray(val) for k, val in sh.items()}
+        nb = len(s.mass)
+        npoly = len(ph["shape"])
+        s.nbs = nb - npoly  # sphere bodies
+        sbody = np.asarray(sp["body"], np.int64)
+        if npoly > nb or (len(sbody) and (sbody.min() < 0 or sbody.max() >= s.nbs)):
+            raise ValueError("spheres must belong to the bodies before the polyhedra (the last len(polyhedra))")
+        if np.asarray(s.inert).shape != (nb, 3):
+            raise ValueError("a scene of spheres and polyhedra needs principal moments of inertia (n_b, 3)")
+        s.ns = len(sbody)
+        s.bmat = np.ascontiguousarray(ph["material"], np.int64)
+        s.pshape = np.ascontiguousarray(ph["shape"], np.int64)
+        s.sbody = np.ascontiguousarray(np.concatenate([sbody, np.arange(s.nbs, nb)]), np.int64)
+        s.soff = np.ascontiguousarray(np.concatenate([np.asarray(sp["offset"], np.float64).reshape(-1, 3),
+                                                      np.zeros((npoly, 3))]))
+        prad = np.asarray(sh["radius"], np.float64)[s.pshape] * (1.0 + BOUND_PAD)
+        s.rad = np.ascontiguousarray(np.concatenate([np.asarray(sp["radius"], np.float64), prad]))
+        s.smat = np.ascontiguousarray(np.concatenate([np.asarray(sp["material"], np.int64), s.bmat]))
+        s.clumps = True  # every body has member primitives (a polyhedron: one, at its centroid)
+        flags = list(s.flags)
+        flags[K.F_CLUMPS] = True
+        s.flags = tuple(flags)
+        s.L = s.angmom_from_omega()
+        n = len(s.rad)
+        s.xs, s.vs, s.ws, s.fs, s.ts = (np.zeros((n, 3)) for _ in range(5))
+        order = np.argsort(s.sbody, kind="stable")
+        s.mstart = np.searchsorted(s.sbody[order], np.arange(nb + 1)).astype(np.int64)
+        s.mlist = order.astype(np.int64)
+        SphereShape._place_members(s)
+        s.ws[:] = s.w[s.sbody]
+        s.smass = np.ascontiguousarray(s.mass[s.sbody])
+        self._poly_tables(s, sh)
+        s.bonds = BondSet.empty(0)
+
+    @staticmethod
+    def _poly_tables(s, sh):
+        """Template tables, per-primitive template (-1 for spheres) and rows of the world arrays."""
+        vs = np.ascontiguousarray(sh["vertex_start"], np.int64)
+        fs = np.ascontiguousarray(sh["face_start"], np.int64)
+        s.shapes = (vs, np.ascontiguousarray(sh["vertices"], np.float64), fs,
+                    np.ascontiguousarray(sh["face_vertex_start"], np.int64),
+                    np.ascontiguousarray(sh["face_vertices"], np.int64),
+                    np.ascontiguousarray(sh["face_normal"], np.float64),
+                    np.ascontiguousarray(sh["face_offset"], np.float64))
+        s.shape = np.ascontiguousarray(np.concatenate([np.full(s.ns, -1, np.int64), s.pshape]))
+        n = len(s.shape)
+        nv = np.zeros(n, np.int64)
+        nf = np.zeros(n, np.int64)
+        nv[s.ns:] = np.diff(vs)[s.pshape]
+        nf[s.ns:] = np.diff(fs)[s.pshape]
+        s.bvstart = np.zeros(n + 1, np.int64)
+        s.bfstart = np.zeros(n + 1, np.int64)
+        s.bvstart[1:] = np.cumsum(nv)
+        s.bfstart[1:] = np.cumsum(nf)
+        s.world = (np.zeros((int(s.bvstart[-1]), 3)), np.zeros((int(s.bfstart[-1]), 3)),
+                   np.zeros(int(s.bfstart[-1])))
+
+    @staticmethod
+    def body_of_primitive(s):
+        return s.sbody
+
+    # ---- the engine's tuples ----------------------------------------------------------
+    @staticmethod
+    def geometry(s):
+        from demcli.kernels.shapes.mixed import MixedGeometry
+        from demcli.kernels.shapes.polyhedra import PolyGeometry
+        from demcli.kernels.shapes.spheres import SphereGeometry
+
+        vs, verts, fs, fvs, fv, fn, fo = s.shapes
+        return MixedGeometry(SphereGeometry(s.xs, s.vs, s.ws, s.rad, s.smat, s.smass, s.sbody, s.soff),
+                             PolyGeometry(s.rad, s.smat, s.shape, vs, verts, fs, fvs, fv, fn, fo, s.bvstart,
+                                          s.bfstart, *s.world), s.ns, s.qprm)
+
+    @staticmethod
+    def members(s):
+        return K.Members(s.mstart, s.mlist, s.xs, s.fs, s.ts)
+
+    @staticmethod
+    def bond_arrays(s):
+        return None, _empty2(N_BTABLE)
+
+    @staticmethod
+    def after_advance(s):
+        pass
+
+    @staticmethod
+    def initial_lists(s, groups):
+        """Contacts seeded with the stored ones (primitive indices), as the other shapes do."""
+        n = len(s.rad)
+        cols = {"ft": (3, s.flags[K.F_FRICTION]), "mr": (3, s.flags[K.F_ROLLING]), "force": (3, True),
+                "depth": (0, True)}
+        start, ci, cj, rows = stored_contacts(groups.get("contacts", {}), "i", "j", n, cols)
+        wstart, wp, ww, wrows = stored_contacts(groups.get("wall_contacts", {}), "sphere", "wall", n, cols,
+                                                len(s.walls))
+        return contacts_tuple(start, ci, cj, rows, wstart, wp, ww, wrows, s.xs.copy(), len(s.walls), True, True)
+
+    # ---- measures -----------------------------------------------------------------------
+    @staticmethod
+    def critical_dt(s):
+        """The smaller of the spheres' critical step (:func:`critical_time_step` over the sphere
+        primitives; its linear-law bound takes the stiffest material pair, polyhedra included) and
+        the polyhedra's (:meth:`PolyShape.critical_dt` of the polyhedral bodies)."""
+        ns = s.ns
+        dt = critical_time_step(s.model, s.prm, s.materials, s.mass, s.rad[:ns], s.sbody[:ns], s.smat[:ns])
+        if s.model.law != "linear":
+            dt *= math.sqrt(s.mass_scale)
+        b = slice(s.nbs, None)
+        poly = SimpleNamespace(mass=s.mass[b], inert=s.inert[b], bflags=s.bflags[b], shape=s.pshape,
+                               bmat=s.bmat, prm=s.qprm, walls=s.walls, shapes=s.shapes,
+                               _shape_group=s._shape_group)
+        return min(float(dt), PolyShape.critical_dt(poly))
+
+    @staticmethod
+    def strain_energy(s):
+        """Elastic energy of the contacts [J]: sphere and sphere-polyhedron contacts exactly,
+        polyhedron contacts estimated (:func:`demcli.kernels.shapes.mixed.strain_energy_mixed`)."""
+        from demcli.kernels.shapes.mixed import strain_energy_mixed
+        from demcli.kernels.shapes.spheres import wall_strain_energy
+
+        nl = s.nl
+        w = s.walls
+        friction, rolling = s.flags[K.F_FRICTION], s.flags[K.F_ROLLING]
+        e = strain_energy_mixed(MixedShape.geometry(s), nl, s.prm, s.law, friction, rolling)
+        return float(e + wall_strain_energy(s.xs[:s.ns], s.rad, s.smat, s.prm, s.law, nl.wstart, nl.wwall, w.kind,
+                                            s.wpoint, w.normal, w.radius, w.material, nl.wft, nl.wmr, friction,
+                                            rolling))
+
+    @staticmethod
+    def contact_count(s):
+        """(primitive pairs touching, primitive-wall contacts touching) at the last evaluation."""
+        nl = s.nl
+        n_pw = int(np.count_nonzero(np.any(nl.wfc[:, :3] != 0.0, axis=1))) if len(nl.wfc) else 0
+        return int(nl.act.sum()), n_pw
+
+    @staticmethod
+    def late_groups(s):
+        return {}
+
+    @staticmethod
+    def groups(s):
+        """spheres (the sphere primitives), polyhedra and polyhedron_shapes (passed through),
+        contacts and wall_contacts by primitive, with the depth of polyhedron contacts."""
+        from demcli.kernels.shapes.polyhedra import G_DEPTH
+
+        nl = s.nl
+        friction, rolling = s.flags[K.F_FRICTION], s.flags[K.F_ROLLING]
+        act = nl.act.astype(bool)
+        contacts = {"i": nl.pi[act].copy(), "j": nl.pj[act].copy(), "force": nl.fc[act].copy(),
+                    "depth": nl.geo[act, G_DEPTH].copy()}
+        wact = np.any(nl.wfc[:, :3] != 0.0, axis=1) if len(nl.wfc) else np.zeros(0, bool)
+        wall_contacts = {"sphere": nl.wprim[wact].copy(), "wall": nl.wwall[wact].copy(),
+                         "force": nl.wfc[wact, :3].copy(), "depth": nl.wgeo[wact, G_DEPTH].copy()}
+        for name, on, rows, wrows in (("ft", friction, nl.ft, nl.wft), ("mr", rolling, nl.mr, nl.wmr)):
+            if on:
+                contacts[name] = rows[act].copy()
+                wall_contacts[name] = wrows[wact].copy()
+        ns = s.ns
+        spheres = {"body": s.sbody[:ns].copy(), "offset": s.soff[:ns].copy(), "radius": s.rad[:ns].copy(),
+                   "material": s.smat[:ns].copy()}
+        return {"spheres": spheres, "polyhedra": {k: v.copy() for k, v in s._poly_group.items()},
+                "polyhedron_shapes": {k: v.copy() for k, v in s._shape_group.items()},
+                "contacts": contacts, "wall_contacts": wall_contacts}
