@@ -8,9 +8,9 @@ a rigid rotor (``bodies.inertia`` (n_b, 3): principal moments; a sphere's three 
 kernels and the contact physics are in :mod:`demcli.kernels.shapes.mixed`: sphere pairs by the
 sphere law of the contact model, polyhedron pairs by the volumetric law, sphere-polyhedron
 pairs by the sphere law at the point contact of the sphere with the polyhedron's nearest
-feature. Walls: planes. Contacts are stored by primitive (sphere primitives first, then one
-per polyhedron) in ``contacts`` (i, j, force on i, depth, ft, mr) and ``wall_contacts``
-(sphere = the primitive, wall, force, depth, ft, mr).
+feature. Walls: planes. Contacts are stored by kind: ``contacts`` and ``wall_contacts``
+(spheres, as in a spheres-only scene), ``body_contacts`` and ``body_wall_contacts`` (polyhedral
+bodies, as in a polyhedra-only scene) and ``sphere_body_contacts`` (sphere, polyhedral body).
 """
 
 import math
@@ -157,13 +157,18 @@ class MixedShape:
 
     @staticmethod
     def initial_lists(s, groups):
-        """Contacts seeded with the stored ones (primitive indices), as the other shapes do."""
+        """Contacts seeded with the stored ones (:meth:`groups` writes them by kind), as the other
+        shapes do: history for carry-over, forces, depths and touching flags."""
         n = len(s.rad)
         cols = {"ft": (3, s.flags[K.F_FRICTION]), "mr": (3, s.flags[K.F_ROLLING]), "force": (3, True),
                 "depth": (0, True)}
-        start, ci, cj, rows = stored_contacts(groups.get("contacts", {}), "i", "j", n, cols)
-        wstart, wp, ww, wrows = stored_contacts(groups.get("wall_contacts", {}), "sphere", "wall", n, cols,
-                                                len(s.walls))
+        pairs = _by_primitive(s, groups, (("contacts", "i", "j", 0, 0),
+                                          ("sphere_body_contacts", "sphere", "body", 0, 1),
+                                          ("body_contacts", "i", "j", 1, 1)))
+        walls = _by_primitive(s, groups, (("wall_contacts", "sphere", "wall", 0, None),
+                                          ("body_wall_contacts", "body", "wall", 1, None)))
+        start, ci, cj, rows = stored_contacts(pairs, "a", "b", n, cols)
+        wstart, wp, ww, wrows = stored_contacts(walls, "a", "b", n, cols, len(s.walls))
         return contacts_tuple(start, ci, cj, rows, wstart, wp, ww, wrows, s.xs.copy(), len(s.walls), True, True)
 
     # ---- measures -----------------------------------------------------------------------
@@ -210,25 +215,60 @@ class MixedShape:
 
     @staticmethod
     def groups(s):
-        """spheres (the sphere primitives), polyhedra and polyhedron_shapes (passed through),
-        contacts and wall_contacts by primitive, with the depth of polyhedron contacts."""
+        """spheres (the sphere primitives), polyhedra and polyhedron_shapes (passed through), and
+        the touching contacts by kind: ``contacts`` (sphere pairs), ``sphere_body_contacts``
+        (sphere, polyhedral body; force on the sphere), ``body_contacts`` (polyhedron pairs, with
+        depth), ``wall_contacts`` (spheres), ``body_wall_contacts`` (polyhedra, with depth)."""
         from demcli.kernels.shapes.polyhedra import G_DEPTH
 
         nl = s.nl
+        ns = s.ns
         friction, rolling = s.flags[K.F_FRICTION], s.flags[K.F_ROLLING]
         act = nl.act.astype(bool)
-        contacts = {"i": nl.pi[act].copy(), "j": nl.pj[act].copy(), "force": nl.fc[act].copy(),
-                    "depth": nl.geo[act, G_DEPTH].copy()}
         wact = np.any(nl.wfc[:, :3] != 0.0, axis=1) if len(nl.wfc) else np.zeros(0, bool)
-        wall_contacts = {"sphere": nl.wprim[wact].copy(), "wall": nl.wwall[wact].copy(),
-                         "force": nl.wfc[wact, :3].copy(), "depth": nl.wgeo[wact, G_DEPTH].copy()}
-        for name, on, rows, wrows in (("ft", friction, nl.ft, nl.wft), ("mr", rolling, nl.mr, nl.wmr)):
-            if on:
-                contacts[name] = rows[act].copy()
-                wall_contacts[name] = wrows[wact].copy()
-        ns = s.ns
-        spheres = {"body": s.sbody[:ns].copy(), "offset": s.soff[:ns].copy(), "radius": s.rad[:ns].copy(),
-                   "material": s.smat[:ns].copy()}
-        return {"spheres": spheres, "polyhedra": {k: v.copy() for k, v in s._poly_group.items()},
-                "polyhedron_shapes": {k: v.copy() for k, v in s._shape_group.items()},
-                "contacts": contacts, "wall_contacts": wall_contacts}
+        pi, pj, wp = nl.pi, nl.pj, nl.wprim
+        out = {"spheres": {"body": s.sbody[:ns].copy(), "offset": s.soff[:ns].copy(), "radius": s.rad[:ns].copy(),
+                           "material": s.smat[:ns].copy()},
+               "polyhedra": {k: v.copy() for k, v in s._poly_group.items()},
+               "polyhedron_shapes": {k: v.copy() for k, v in s._shape_group.items()}}
+        kinds = (("contacts", act & (pj < ns), ("i", pi), ("j", pj), False, rolling),
+                 ("sphere_body_contacts", act & (pi < ns) & (pj >= ns), ("sphere", pi), ("body", s.sbody[pj]), False,
+                  rolling),
+                 ("body_contacts", act & (pi >= ns), ("i", s.sbody[pi]), ("j", s.sbody[pj]), True, False))
+        for name, m, (ka, a), (kb, b), depth, mr in kinds:
+            out[name] = _contact_rows(m, ka, a, kb, b, nl.fc, nl.geo[:, G_DEPTH] if depth else None,
+                                      nl.ft if friction else None, nl.mr if mr else None)
+        wsph = wact & (wp < ns)
+        wpol = wact & (wp >= ns)
+        out["wall_contacts"] = _contact_rows(wsph, "sphere", wp, "wall", nl.wwall, nl.wfc[:, :3], None,
+                                             nl.wft if friction else None, nl.wmr if rolling else None)
+        out["body_wall_contacts"] = _contact_rows(wpol, "body", s.sbody[wp], "wall", nl.wwall, nl.wfc[:, :3],
+                                                  nl.wgeo[:, G_DEPTH], nl.wft if friction else None, None)
+        return out
+
+
+def _contact_rows(mask, ka, a, kb, b, force, depth, ft, mr):
+    """One contact group: the rows of ``mask`` (a, b indices, force, and depth, ft, mr where given)."""
+    out = {ka: np.asarray(a)[mask].copy(), kb: np.asarray(b)[mask].copy(), "force": force[mask].copy()}
+    for key, rows in (("depth", depth), ("ft", ft), ("mr", mr)):
+        if rows is not None:
+            out[key] = rows[mask].copy()
+    return out
+
+
+def _by_primitive(s, groups, kinds):
+    """Stored contacts of several groups as one group of primitive indices a, b (a < b for pairs):
+    kinds: (group, key a, key b, a is a body, b is a body (None: a wall index))."""
+    prim_of_body = np.full(len(s.mass), -1, np.int64)
+    prim_of_body[s.nbs:] = np.arange(s.ns, len(s.rad))
+    parts = {"a": [], "b": [], "force": [], "depth": [], "ft": [], "mr": []}
+    for name, ka, kb, a_body, b_body in kinds:
+        g = groups.get(name, {})
+        a = np.asarray(g.get(ka, np.zeros(0, np.int64)), np.int64)
+        b = np.asarray(g.get(kb, np.zeros(0, np.int64)), np.int64)
+        parts["a"].append(prim_of_body[a] if a_body else a)
+        parts["b"].append(b if b_body is None else prim_of_body[b] if b_body else b)
+        for key, cols in (("force", 3), ("depth", 0), ("ft", 3), ("mr", 3)):
+            shape = (len(a), cols) if cols else (len(a),)
+            parts[key].append(np.asarray(g[key], np.float64).reshape(shape) if key in g else np.zeros(shape))
+    return {k: np.concatenate(v) for k, v in parts.items()}

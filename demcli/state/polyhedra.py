@@ -90,6 +90,16 @@ for _name, _kind, _dims, _unit, _doc, _kw in [
          {"required": False, "finite": True})]:
     register(Field(f"body_wall_contacts/{_name}", _kind, _dims, _unit, _doc, writer="engine (polyhedra)", **_kw))
 
+register_group("sphere_body_contacts", "Persistent sphere-polyhedron contacts of a scene with both, with their "
+               "history", writer="engine (mixed)")
+for _name, _kind, _dims, _unit, _doc, _kw in [
+        ("sphere", "i", ("n_sbc",), "", "sphere index", {"index_of": "n_s"}),
+        ("body", "i", ("n_sbc",), "", "polyhedral body index", {"index_of": "n_b"}),
+        ("ft", "f", ("n_sbc", 3), "N", "tangential spring force (history)", {"required": False, "finite": True}),
+        ("mr", "f", ("n_sbc", 3), "N m", "rolling-resistance moment (history)", {"required": False, "finite": True}),
+        ("force", "f", ("n_sbc", 3), "N", "last contact force on the sphere", {"finite": True})]:
+    register(Field(f"sphere_body_contacts/{_name}", _kind, _dims, _unit, _doc, writer="engine (mixed)", **_kw))
+
 register_group("adaptive_damping", "State of the adaptive mass-proportional damping (seed 002, eqs. 23-27)",
                writer="effect adaptive_damping")
 register(Field("adaptive_damping/alpha", "f", (), "1/s", "current damping coefficient alpha",

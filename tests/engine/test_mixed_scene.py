@@ -187,9 +187,9 @@ def test_sphere_pairs_of_a_mixed_scene_follow_the_sphere_law_as_alone():
     np.testing.assert_allclose(mixed.w[:2], alone.w, rtol=1e-12, atol=1e-12)
 
 
-def test_a_polyhedral_plate_loads_a_sphere_bed_in_a_box():
-    # Given: 3 x 3 x 2 spheres in a box of plane walls, a loaded cuboid plate (an actor) on top,
-    # gravity, damping
+def plate_on_a_bed(load=20.0):
+    """3 x 3 x 2 spheres in a box of plane walls and a loaded cuboid plate (an actor) on top:
+    (groups, walls, the System's keyword arguments)."""
     from demcli.engine.actors import box_polyhedron
 
     xs = np.array([[0.01 + 0.02 * i, 0.01 + 0.02 * j, 0.0105 + 0.021 * k]
@@ -197,13 +197,19 @@ def test_a_polyhedral_plate_loads_a_sphere_bed_in_a_box():
     plate = polyhedra_groups([box_polyhedron([0.058, 0.058, 0.01])], RHO, x=[[0.03, 0.03, 0.048]],
                              flags=np.array([K.FIX_ROTATION | K.FIX_X | K.FIX_Y | K.LOADED], np.int8))
     g = mixed_groups(sphere_groups(xs), plate)
-    load = 20.0
     g["actors"] = {"body": np.array([18]), "name": np.array(["plate"], dtype=object),
                    "load_mean": np.array([[0.0, 0.0, -load]]), "load_amplitude": np.zeros((1, 3)),
                    "frequency": np.zeros(1), "phase": np.zeros(1), "start": np.zeros(1)}
-    box = Walls.box_faces([0.06, 0.06, 0.2])
-    s = system(g, effects=["gravity", "friction", "local_damping"], gravity=(0.0, 0.0, -9.81), walls=box,
-               restitution=0.3, dt=5e-6, local_damping=0.7)
+    kw = dict(effects=["gravity", "friction", "local_damping"], gravity=(0.0, 0.0, -9.81), restitution=0.3,
+              dt=5e-6, local_damping=0.7)
+    return g, Walls.box_faces([0.06, 0.06, 0.2]), kw
+
+
+def test_a_polyhedral_plate_loads_a_sphere_bed_in_a_box():
+    # Given: the plate of 20 N on the bed, gravity, damping
+    load = 20.0
+    g, box, kw = plate_on_a_bed(load)
+    s = system(g, walls=box, **kw)
     assert s.nsmall == 18  # the plate is paired outside the cell grid
     # When: 0.15 s
     s.advance(30000)
@@ -217,3 +223,22 @@ def test_a_polyhedral_plate_loads_a_sphere_bed_in_a_box():
     on_plate = (nl.pj == 18) & (nl.act == 1)
     assert on_plate.sum() >= 3
     assert nl.fc[on_plate, 2].sum() == pytest.approx(-(9.81 * s.mass[18] + load), rel=1e-3)
+
+
+def test_a_mixed_scene_resumes_from_its_state_groups_bit_for_bit():
+    # Given: the plate scene halfway down, and a second System built from its state groups
+    # (contacts stored by kind: contacts, sphere_body_contacts, body_contacts, wall_contacts)
+    g, box, kw = plate_on_a_bed()
+    s = system(g, walls=box, **kw)
+    s.advance(3000)
+    groups = s.groups()
+    assert len(groups["sphere_body_contacts"]["sphere"]) + len(groups["contacts"]["i"]) > 0
+    r = system(groups, walls=Walls.box_faces([0.06, 0.06, 0.2]), **kw)
+    r.prime = False  # the stored loads, as a resumed stage (stages/loop.py)
+    # When: both go on
+    s.advance(2000)
+    r.advance(2000)
+    # Then: the same numbers
+    np.testing.assert_array_equal(r.x, s.x)
+    np.testing.assert_array_equal(r.L, s.L)
+    np.testing.assert_array_equal(r.nl.ft, s.nl.ft)
