@@ -100,8 +100,9 @@ def drift(x, v, i, dt, xref, lim2, rebuild):
 def kick(b, fl, v, w, L, inert, m, im, iv, fx, fy, fz, tx, ty, tz, h, c1, c2, rotate_body, planar, adaptive):
     """Half kick of body b: v, and omega (spin rotor) or L (rigid rotor; omega is left to the
     caller, who rotates or recomputes it). L: the bodies' L (rigid rotors) or None (spin rotors:
-    the switch is the argument's type, see :func:`rotors`). im = h / m, iv = h / I (spin rotors): computed once
-    by the caller for both kicks of a fused step (a division costs more than the kick). With ``adaptive`` the damped form (c1, c2) and the
+    the switch is the argument's type, see :func:`rotors`). im = h / m, iv = h / I (spin rotors):
+    computed once by the caller for both kicks of a fused step (a division costs more than the
+    kick). With ``adaptive`` the damped form (c1, c2) and the
     energy measures of the adaptive damping (m sum ((v0 + v1)/2)^2, the rotational omega.L before
     the kick, and for spin rotors after it) are returned; zeros otherwise (c1 = c2 = 1: the plain
     kick, the same numbers)."""
