@@ -127,9 +127,12 @@ class SphereShape:
         return K.Members(s.mstart, s.mlist, s.xs, s.fs, s.ts) if s.clumps else None
 
     def bond_arrays(self, s):
-        """(bond state tuple, bond-model table for the current dt) (cached on dt); the tuple is
-        None when the bonds effect is off (the engine then compiles no bond pass)."""
-        if not s.flags[K.F_BONDS]:
+        """(bond state tuple, bond-model table for the current dt) (cached on dt). Without the
+        bonds effect the tuple is None (the engine compiles no bond code), unless the system is
+        told that its case bonds in another stage (``System(bond_code=True)``): it is then passed
+        empty, so that an asphalt case whose first stages have no bonds and whose later ones do
+        compiles one sphere engine, not two."""
+        if not s.flags[K.F_BONDS] and not s.bond_code:
             return None, _empty2(N_BTABLE)
         self._replacing = s.bonds.replacing()
         key = (s.dt, s.bonds.prm.tobytes())

@@ -40,6 +40,7 @@ from demcli.kernels.layout import (BAD_ENERGY, BAD_NUMBER, BAD_OVERLAP, C_BODY, 
                                    F_VISCOUS, OK)
 from demcli.kernels.neighbors import add_actor_pairs, build_pairs, build_reverse, build_wall_pairs, carry_history
 from demcli.kernels.shapes import pair_pass, place, primitives, spin_rotors, volumetric, wall_pass, worst_overlap
+from demcli.kernels.switch import choose
 
 
 @njit
@@ -69,7 +70,8 @@ def rebuild_lists(g, bd, nl, par, flags, wa, bonds, bprm, vol, pair_torque):
         nstart, npi, npj = add_actor_pairs(nstart, npj, xs, rad, prim_body, nsmall, skin)
     else:
         nstart, npi, npj = build_pairs(xs, rad, prim_body, skin, par.max_cells)
-    nstart, npi, npj = unbonded_pairs(bonds, bprm, nstart, npi, npj)
+    if flags[F_BONDS]:
+        nstart, npi, npj = unbonded_pairs(bonds, bprm, nstart, npi, npj)
     npair = npi.shape[0]
     nft = np.zeros((npair if friction else 0, 3))
     nmr = np.zeros((npair if rolling else 0, 3))
@@ -102,16 +104,17 @@ def rebuild_lists(g, bd, nl, par, flags, wa, bonds, bprm, vol, pair_torque):
 
 
 @njit(parallel=True)
-def gather(bd, L, fs, ts, nl, par, flags, sw, gs, dt, frow, trow, erow, esph, ebody, eabs, kevec, alpha, tload,
-           fxref, lim2, rebuild):
+def gather(bd, L, fs, ts, own, nl, par, flags, sw, gs, dt, frow, trow, erow, esph, ebody, eabs, kevec, alpha,
+           tload, fxref, lim2, rebuild):
     """Per primitive: its own row sums, the j sides of its pairs, its wall contacts; clump
     members keep their loads in fs / ts (Members.fs / .ts) for :func:`member_loads`; a primitive
     that is its own body (fs None) finishes the step (motion.finish_body) and, for spin rotors
     (``fxref``: the list's reference positions; None for rigid rotors) with ``fuse_next``, takes
     the next step's first half kick and drift (the same arithmetic as kick_drift).
 
-    L (None for spin rotors, motion.rotors), fs and fxref switch at compile time (numba prunes
-    ``is None`` branches on argument types): a scene compiles only its own path.
+    L (None for spin rotors, motion.rotors), fs (None without members), own (None when members
+    make up the bodies: the body finish is compiled out) and fxref switch at compile time (numba
+    prunes ``is None`` branches on argument types): a scene compiles only its own path.
     gs: (pair_torque, torque, fuse_next); dt: the contact step (0 when priming).
     """
     pair_torque, torque, fuse_next = gs
@@ -182,7 +185,8 @@ def gather(bd, L, fs, ts, nl, par, flags, sw, gs, dt, frow, trow, erow, esph, eb
             ts[i, 0] = tx
             ts[i, 1] = ty
             ts[i, 2] = tz
-            continue
+            if own is None:
+                continue
         fx, fy, fz, tx, ty, tz, im, iv = M.finish_body(i, fx, fy, fz, tx, ty, tz, v, w, L, q, inert, mass, bflags, f,
                                                        tq, load, gravity, damping, sw, dt, h, cc, alpha, tload,
                                                        not fuse_next, ebody, eabs, kevec)
@@ -297,7 +301,7 @@ def run_steps(nsteps, time, flags, prm, par, bd, g, mb, wa, nl, bonds, bprm, ada
             to nothing); wa: WallArrays;
         nl: Contacts, rebuilt here when needed.
         bonds: bond state (bstart, bj, brstart, brlist, model, state, hist, bfc, btj, bed), see
-            :mod:`demcli.kernels.bonds`, or None (no bonds: their passes compile to nothing);
+            :mod:`demcli.kernels.bonds`, or None (no bond code compiled: SphereShape.bond_arrays);
             bprm: (n_models, N_BPARAMS) bond-model table.
         adamp: (N_ADAMP,) adaptive damping state (motion.A_*), updated in place.
         esph: (n_prim, 2) cumulative contact damping and friction losses [J];
@@ -379,8 +383,8 @@ def run_steps(nsteps, time, flags, prm, par, bd, g, mb, wa, nl, bonds, bprm, ada
         _count_effects(counters, flags, adaptive)
         if nw > 0:
             wall_pass(g, bd, nl, wa, prm, par.law, flags, h)
-        gather(bd, Lr, fs, ts, nl, par, flags, sw, (pair_torque, torque, fuse_next), h, frow, trow, erow, esph, ebody,
-               eabs, kevec, alpha, time + h, spin_rotors(g, mb, nl.xref), lim2, rebuild)
+        gather(bd, Lr, fs, ts, choose(mb, bd.mass, None), nl, par, flags, sw, (pair_torque, torque, fuse_next), h,
+               frow, trow, erow, esph, ebody, eabs, kevec, alpha, time + h, spin_rotors(g, mb, nl.xref), lim2, rebuild)
         counters[C_GATHER] += 1
         if fuse_next:
             drifted = True

@@ -20,7 +20,7 @@ from demcli.kernels import quat
 from demcli.kernels.bonds import bond_forces
 from demcli.kernels.contact import (HERTZ, P_CN, P_ESTAR, P_KN, P_ZETA, contact_law, pair_kinematics,
                                    strain_energy)
-from demcli.kernels.layout import F_CLUMPS, F_ENERGY, F_FRICTION, F_ROLLING
+from demcli.kernels.layout import F_BONDS, F_CLUMPS, F_ENERGY, F_FRICTION, F_ROLLING
 from demcli.kernels.switch import choose
 from demcli.kernels.walls import wall_distance
 
@@ -231,8 +231,9 @@ def pair_pass(g, bd, nl, prm, law, flags, dt, frow, trow, erow, bonds, bprm, bro
     energy = flags[F_ENERGY]
     _pair_forces(nl.start, nl.pj, g.xs, g.vs, g.ws, g.rad, g.mat, g.smass, prm, law, dt, nl.ft, nl.mr, friction,
                  rolling, energy, nl.fc, nl.tj, nl.act, nl.epair, frow, trow, erow, None)
-    bond_forces(bonds, bprm, g.xs, g.vs, g.ws, g.rad, g.mat, g.smass, prm, law, dt, friction, rolling, energy,
-                frow, trow, erow, broke)
+    if flags[F_BONDS]:
+        bond_forces(bonds, bprm, g.xs, g.vs, g.ws, g.rad, g.mat, g.smass, prm, law, dt, friction, rolling, energy,
+                    frow, trow, erow, broke)
 
 
 @njit
