@@ -149,15 +149,11 @@ class System:
             keeps alpha from decaying towards zero during a long quiet phase (0.99^n)
             so that it can react within tens of steps, the ceiling keeps the damping
             factor (1 - alpha dt/4)/(1 + alpha dt/4) of a half kick positive.
-        bond_code: compile the bond passes even without the bonds effect (a stage of a case that
-            bonds in another stage: one compiled engine for the case; the pass runs by the flag).
     """
 
     def __init__(self, groups, materials, model, plan, walls, dynamics, dt, time=0.0, step=0, mass_scale=1.0,
-                 contact_damping=None, adaptive_damping=None, alpha0=ALPHA0, alpha_bounds=(1e-3, 1.0),
-                 bond_code=False):
+                 contact_damping=None, adaptive_damping=None, alpha0=ALPHA0, alpha_bounds=(1e-3, 1.0)):
         self.plan = plan
-        self.bond_code = bool(bond_code)
         self.materials = list(materials)
         self.model = model
         self.walls = walls

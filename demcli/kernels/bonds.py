@@ -467,9 +467,9 @@ def bond_forces(bonds, bprm, xs, vs, ws, rad, smat, smass, prm, law, dt, frictio
     """The bonds' forces into the pair pass's row sums (:func:`bond_pass`, :func:`bond_gather`).
 
     ``bonds``: the bond state tuple (bstart, bj, brstart, brlist, model, state, hist, bfc, btj,
-    bed), or None for a scene without bond code (polyhedra, mixed scenes, sphere cases that
-    never bond): numba prunes the branch on the argument's type, so those compile none of the
-    bond passes."""
+    bed), or None for shapes whose bodies do not bond (polyhedra, mixed scenes): numba prunes
+    the branch on the argument's type, so those compile none of the bond passes. Sphere scenes
+    pass the tuple (empty without bonds) and the pass runs where the flag says."""
     if bonds is None:
         return
     bstart, bj, brstart, brlist, bmodel, bstate, bhist, bfc, btj, bed = bonds

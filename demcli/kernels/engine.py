@@ -301,7 +301,7 @@ def run_steps(nsteps, time, flags, prm, par, bd, g, mb, wa, nl, bonds, bprm, ada
             to nothing); wa: WallArrays;
         nl: Contacts, rebuilt here when needed.
         bonds: bond state (bstart, bj, brstart, brlist, model, state, hist, bfc, btj, bed), see
-            :mod:`demcli.kernels.bonds`, or None (no bond code compiled: SphereShape.bond_arrays);
+            :mod:`demcli.kernels.bonds`; None for polyhedra and mixed scenes (no bond code compiled);
             bprm: (n_models, N_BPARAMS) bond-model table.
         adamp: (N_ADAMP,) adaptive damping state (motion.A_*), updated in place.
         esph: (n_prim, 2) cumulative contact damping and friction losses [J];

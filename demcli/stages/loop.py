@@ -47,12 +47,6 @@ def _is_clumped(groups):
     return len(s["radius"]) != len(groups["bodies"]["mass"]) or bool(np.any(s["offset"] != 0.0))
 
 
-def case_bonds(case):
-    """Whether any stage of the case declares bonds (its sphere stages then compile the bond code,
-    one engine for the whole case; :meth:`demcli.engine.sphere_shape.SphereShape.bond_arrays`)."""
-    return any(hasattr(st, "get") and st.get("bonds") is not None for st in case.stages)
-
-
 def make_system(ctx, cfg, groups, time=0.0, step=0, resume=False):
     """System, plan and time-step information for this stage (``resume``: from a checkpoint)."""
     from demcli.engine.plan import make_plan
@@ -80,7 +74,7 @@ def make_system(ctx, cfg, groups, time=0.0, step=0, resume=False):
 
         model = dataclasses.replace(model, pairs=phase_models(ctx, groups)[2] + model.pairs)
     system = System(groups, case_materials(ctx.case, cfg.scaling.stiffness), model, plan, walls,
-                    dyn, dt=1.0, time=time, step=step, bond_code=case_bonds(ctx.case), **extra)
+                    dyn, dt=1.0, time=time, step=step, **extra)
     if p.adaptive_damping is not None and not resume:  # a resumed stage keeps its adapted alpha
         system.alpha = float(p.adaptive_damping.initial)
     if cfg.get("bonds") is not None:
