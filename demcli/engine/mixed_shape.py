@@ -20,7 +20,7 @@ import numpy as np
 
 from demcli.engine.bonds import BondSet
 from demcli.engine.materials import LAWS, critical_time_step, pair_table
-from demcli.engine.poly_shape import BOUND_PAD, PolyShape, poly_pair_table
+from demcli.engine.poly_shape import BOUND_PAD, PolyShape, poly_pair_table, shape_tables, world_rows
 from demcli.engine.sphere_shape import SphereShape, _empty2, contacts_tuple, stored_contacts
 from demcli.kernels import layout as K
 from demcli.kernels.bonds import N_BTABLE
@@ -101,31 +101,11 @@ class MixedShape:
         SphereShape._place_members(s)
         s.ws[:] = s.w[s.sbody]
         s.smass = np.ascontiguousarray(s.mass[s.sbody])
-        self._poly_tables(s, sh)
-        s.bonds = BondSet.empty(0)
-
-    @staticmethod
-    def _poly_tables(s, sh):
-        """Template tables, per-primitive template (-1 for spheres) and rows of the world arrays."""
-        vs = np.ascontiguousarray(sh["vertex_start"], np.int64)
-        fs = np.ascontiguousarray(sh["face_start"], np.int64)
-        s.shapes = (vs, np.ascontiguousarray(sh["vertices"], np.float64), fs,
-                    np.ascontiguousarray(sh["face_vertex_start"], np.int64),
-                    np.ascontiguousarray(sh["face_vertices"], np.int64),
-                    np.ascontiguousarray(sh["face_normal"], np.float64),
-                    np.ascontiguousarray(sh["face_offset"], np.float64))
+        # template tables, per-primitive template (-1 for spheres) and rows of the world arrays
+        s.shapes = shape_tables(sh)
         s.shape = np.ascontiguousarray(np.concatenate([np.full(s.ns, -1, np.int64), s.pshape]))
-        n = len(s.shape)
-        nv = np.zeros(n, np.int64)
-        nf = np.zeros(n, np.int64)
-        nv[s.ns:] = np.diff(vs)[s.pshape]
-        nf[s.ns:] = np.diff(fs)[s.pshape]
-        s.bvstart = np.zeros(n + 1, np.int64)
-        s.bfstart = np.zeros(n + 1, np.int64)
-        s.bvstart[1:] = np.cumsum(nv)
-        s.bfstart[1:] = np.cumsum(nf)
-        s.world = (np.zeros((int(s.bvstart[-1]), 3)), np.zeros((int(s.bfstart[-1]), 3)),
-                   np.zeros(int(s.bfstart[-1])))
+        s.bvstart, s.bfstart, s.world = world_rows(s.shapes, s.shape)
+        s.bonds = BondSet.empty(0)
 
     @staticmethod
     def body_of_primitive(s):
@@ -202,12 +182,7 @@ class MixedShape:
                                             s.wpoint, w.normal, w.radius, w.material, nl.wft, nl.wmr, friction,
                                             rolling))
 
-    @staticmethod
-    def contact_count(s):
-        """(primitive pairs touching, primitive-wall contacts touching) at the last evaluation."""
-        nl = s.nl
-        n_pw = int(np.count_nonzero(np.any(nl.wfc[:, :3] != 0.0, axis=1))) if len(nl.wfc) else 0
-        return int(nl.act.sum()), n_pw
+    contact_count = staticmethod(SphereShape.contact_count)  # (pairs touching, wall contacts touching)
 
     @staticmethod
     def late_groups(s):

@@ -154,6 +154,32 @@ def polyhedra_groups(polys, density, x=None, q=None, v=None, omega=None, materia
     return {"bodies": bodies, "spheres": spheres, "polyhedra": polyhedra, "polyhedron_shapes": table.to_group()}
 
 
+def shape_tables(sh):
+    """The polyhedron_shapes CSR tables as the kernels take them (body frame): (vertex_start,
+    vertices, face_start, face_vertex_start, face_vertices, face_normal, face_offset)."""
+    return (np.ascontiguousarray(sh["vertex_start"], np.int64), np.ascontiguousarray(sh["vertices"], np.float64),
+            np.ascontiguousarray(sh["face_start"], np.int64), np.ascontiguousarray(sh["face_vertex_start"], np.int64),
+            np.ascontiguousarray(sh["face_vertices"], np.int64), np.ascontiguousarray(sh["face_normal"], np.float64),
+            np.ascontiguousarray(sh["face_offset"], np.float64))
+
+
+def world_rows(shapes, shape):
+    """(bvstart, bfstart, (wvert, wnorm, woff)): each row's slice of the world vertex and face
+    arrays for the templates ``shape`` (-1: a row without vertices, a sphere of a mixed scene)."""
+    vs, fs = shapes[0], shapes[2]
+    has = shape >= 0
+    nv = np.zeros(len(shape), np.int64)
+    nf = np.zeros(len(shape), np.int64)
+    nv[has] = np.diff(vs)[shape[has]]
+    nf[has] = np.diff(fs)[shape[has]]
+    bvstart = np.zeros(len(shape) + 1, np.int64)
+    bfstart = np.zeros(len(shape) + 1, np.int64)
+    bvstart[1:] = np.cumsum(nv)
+    bfstart[1:] = np.cumsum(nf)
+    return bvstart, bfstart, (np.zeros((int(bvstart[-1]), 3)), np.zeros((int(bfstart[-1]), 3)),
+                              np.zeros(int(bfstart[-1])))
+
+
 class PolyShape:
     """Convex polyhedra: sets the system's polyhedron arrays and gives the engine their tuples.
 
@@ -176,27 +202,13 @@ class PolyShape:
         s._shape_group = {k: np.asarray(val) for k, val in sh.items()}
         s._spheres_group = groups.get("spheres", {"body": np.zeros(0, np.int64), "offset": np.zeros((0, 3)),
                                                   "radius": np.zeros(0), "material": np.zeros(0, np.int64)})
-        nb = len(s.mass)
         s.clumps = False
         s.L = s.angmom_from_omega()
         # shapes (body-frame CSR tables, used as they are) and per-body rows of the world arrays
         s.shape = np.ascontiguousarray(ph["shape"], np.int64)
         s.bmat = np.ascontiguousarray(ph["material"], np.int64)
-        vs = np.ascontiguousarray(sh["vertex_start"], np.int64)
-        fs = np.ascontiguousarray(sh["face_start"], np.int64)
-        s.shapes = (vs, np.ascontiguousarray(sh["vertices"], np.float64), fs,
-                    np.ascontiguousarray(sh["face_vertex_start"], np.int64),
-                    np.ascontiguousarray(sh["face_vertices"], np.int64),
-                    np.ascontiguousarray(sh["face_normal"], np.float64),
-                    np.ascontiguousarray(sh["face_offset"], np.float64))
-        nv = np.diff(vs)[s.shape]
-        nf = np.diff(fs)[s.shape]
-        s.bvstart = np.zeros(nb + 1, np.int64)
-        s.bfstart = np.zeros(nb + 1, np.int64)
-        s.bvstart[1:] = np.cumsum(nv)
-        s.bfstart[1:] = np.cumsum(nf)
-        s.world = (np.zeros((int(s.bvstart[-1]), 3)), np.zeros((int(s.bfstart[-1]), 3)),
-                   np.zeros(int(s.bfstart[-1])))
+        s.shapes = shape_tables(sh)
+        s.bvstart, s.bfstart, s.world = world_rows(s.shapes, s.shape)
         s.rad = np.ascontiguousarray(np.asarray(sh["radius"], np.float64)[s.shape] * (1.0 + BOUND_PAD))
         s.xs = s.x  # the bodies are the particles: the dem stage measures the scene through xs
         s.bonds = BondSet.empty(0)
