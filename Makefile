@@ -3,6 +3,7 @@ PYTHON ?= python3
 VENV   ?= .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
+TEST_JOBS ?= 2
 
 .PHONY: run test test-nojit stress bench smoke hashes guard clean-jit clean
 
@@ -18,7 +19,7 @@ run: $(STAMP)
 
 ## test: set up, then run the test suite
 test: $(STAMP)
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q -n auto --maxprocesses=$(TEST_JOBS) --dist loadfile
 
 ## stress: the long stability variants
 stress: $(STAMP)

@@ -14,14 +14,6 @@ CASES = Path(__file__).resolve().parents[2] / "cases"
 SMOKE = CASES / "smoke" / "asphalt_carved_cube.yaml"
 
 
-@pytest.fixture(scope="session")
-def smoke_run(tmp_path_factory):
-    """The smoke pipeline, run once per session (other asphalt test modules reuse the folder)."""
-    out = tmp_path_factory.getbasetemp() / "asphalt_carved_cube_smoke"
-    run_case(SMOKE, out=out, quiet=True, threads=1)
-    return out
-
-
 def test_the_seed_lattice_setting_gives_its_ball_count():
     # Given the paper's 120 mm cube with 66 balls along the side
     lat = C.make_lattice((0, 0, 0), (0.12, 0.12, 0.12), count=66)

@@ -15,14 +15,6 @@ CASES = Path(__file__).resolve().parents[2] / "cases"
 SMOKE = CASES / "smoke" / "asphalt_carved_cube.yaml"
 
 
-@pytest.fixture(scope="session")
-def smoke_run(tmp_path_factory):
-    """The smoke pipeline, run once per session (other asphalt test modules reuse the folder)."""
-    out = tmp_path_factory.getbasetemp() / "asphalt_carved_cube_smoke"
-    run_case(SMOKE, out=out, quiet=True, threads=1)
-    return out
-
-
 def _case(tmp_path, n, edit):
     data = yaml.safe_load(SMOKE.read_text())
     data["stages"] = data["stages"][:n]
