@@ -3,6 +3,7 @@
 import shutil
 import subprocess
 import sys
+from pathlib import Path
 
 import h5py
 import meshio
@@ -11,6 +12,8 @@ import pytest
 
 from demcli import run_case
 from demcli.errors import StageError
+
+SMOKE = Path(__file__).resolve().parent.parent / "cases" / "smoke" / "beads.yaml"  # the smoke_case fixture's file
 
 
 def test_run_writes_states_snapshots_records(smoke_case, tmp_path):
@@ -149,11 +152,20 @@ _LONG = ["--set", "stages.settle.time.steps=100000", "--set", "stages.settle.out
          "--set", "stages.settle.output.snapshots=0"]  # chunks of ~0.5 s (a record every 50 000 steps)
 
 
+@pytest.fixture(scope="module")
+def long_reference(tmp_path_factory):
+    """The uninterrupted long run of the sphere smoke case (the smoke_case fixture's file),
+    shared by the signal tests."""
+    out = tmp_path_factory.mktemp("long_reference")
+    run_case(SMOKE, out=out, quiet=True,
+             overrides=[v for v in _LONG if v != "--set"])
+    return out / "01-settle.h5"
+
+
 @pytest.mark.parametrize("sig, when", [("SIGTERM", "between"), ("SIGTERM", "during"), ("SIGINT", "during")])
-def test_signal_writes_a_checkpoint(smoke_case, tmp_path, h5_differences, sig, when):
-    # Given an uninterrupted reference run
+def test_signal_writes_a_checkpoint(smoke_case, tmp_path, h5_differences, long_reference, sig, when):
+    # Given an uninterrupted reference run (long_reference)
     overrides = [v for v in _LONG if v != "--set"]
-    run_case(smoke_case, out=tmp_path / "ref", quiet=True, overrides=overrides)
     # When `demcli run` gets SIGTERM (a batch system's time limit) or SIGINT (Ctrl-C) in the middle
     # of the dem stage: between two chunks, or while a compiled chunk runs (a process outside
     # sends it 0.1 s into a chunk of ~0.5 s: the stage sizes its chunks to half a second)
@@ -191,7 +203,7 @@ main(["run", {str(smoke_case)!r}, "--out", {str(tmp_path / "run")!r}, "--quiet",
     assert (tmp_path / "run" / "01-settle.ckpt.h5").exists()
     # and --resume finishes it bit-identically
     run_case(smoke_case, out=tmp_path / "run", quiet=True, resume=True, overrides=overrides)
-    assert h5_differences(tmp_path / "ref" / "01-settle.h5", tmp_path / "run" / "01-settle.h5") == []
+    assert h5_differences(long_reference, tmp_path / "run" / "01-settle.h5") == []
 
 
 def _poison(path, fn):

@@ -851,7 +851,7 @@ def plane_overlap(va, fsa, fva, offa, na, da, cax, cay, caz, ra, wnx, wny, wnz, 
     return _finish(work, 0, ox, oy, oz)
 
 
-@njit(inline="always")
+@njit
 def contact_frame(vol, sx, sy, sz, cax, cay, caz, cbx, cby, cbz, ra, rb):
     """Unit normal (from B into A), contact area A_c [m^2] and depth d = V/A_c [m].
 

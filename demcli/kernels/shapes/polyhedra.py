@@ -70,7 +70,7 @@ G_DEPTH, G_FN, G_KT = 0, 1, 2
 
 
 
-@njit(inline="always")
+@njit
 def _volumetric_law(prm, ma, mb, vol, depth, area, nx, ny, nz, vx, vy, vz, mstar, dt, ft, k, friction, dashpot):
     """Force on A of one contact (seed eqs. 17-19; see the module docstring).
 
