@@ -22,6 +22,7 @@ import math
 import numpy as np
 
 from demcli.engine.poly_shape import polyhedra_groups
+from demcli.engine.system import is_clumped
 from demcli.geometry import convex_hull
 from demcli.kernels import layout as K
 from demcli.state.polyhedra import ShapeTable
@@ -64,6 +65,8 @@ def add_actor(groups, poly, x, density, material, name, load=None, velocity=None
     one = polyhedra_groups([poly], density, x=np.asarray(x, np.float64).reshape(1, 3),
                            v=None if velocity is None else np.asarray(velocity, np.float64).reshape(1, 3),
                            material=material, flags=np.array([flags], np.int8))
+    if not len(groups.get("polyhedra", {}).get("shape", ())):
+        groups = _as_mixed(groups, one)
     nb = len(groups["bodies"]["mass"])
     out = {k: v for k, v in groups.items()}
     bodies = {}
@@ -98,6 +101,21 @@ def add_actor(groups, poly, x, density, material, name, load=None, velocity=None
     return out
 
 
+def _as_mixed(groups, one):
+    """A sphere or clump scene's groups readied for its first polyhedral body (a mixed scene,
+    :mod:`demcli.engine.mixed_shape`): every body a rigid rotor with three principal moments
+    (a single sphere's (n, 1) inertia broadcast), and empty ``polyhedra`` / ``polyhedron_shapes``
+    groups with the columns of ``one`` (groups of one polyhedron)."""
+    out = dict(groups)
+    bodies = dict(groups["bodies"])
+    inert = np.asarray(bodies["inertia"], np.float64)
+    bodies["inertia"] = np.ascontiguousarray(np.broadcast_to(inert.reshape(len(inert), -1), (len(inert), 3)))
+    out["bodies"] = bodies
+    out["polyhedra"] = {k: np.asarray(v)[:0] for k, v in one["polyhedra"].items()}
+    out["polyhedron_shapes"] = ShapeTable.from_group(one["polyhedron_shapes"]).subset(np.zeros(0, np.int64)).to_group()
+    return out
+
+
 def actor_index(groups, name):
     """Body index of the actor ``name`` (None when the scene has none)."""
     a = groups.get("actors", {})
@@ -116,11 +134,22 @@ def remove_actors(groups):
     n = int(np.min(a["body"]))
     out = {k: v for k, v in groups.items() if k != "actors"}
     out["bodies"] = {k: np.asarray(v)[:n].copy() for k, v in groups["bodies"].items()}
-    ph = {k: np.asarray(v)[:n].copy() for k, v in groups["polyhedra"].items()}
+    first = len(groups["bodies"]["mass"]) - len(groups["polyhedra"]["shape"])  # body of polyhedra row 0
+    ph = {k: np.asarray(v)[:n - first].copy() for k, v in groups["polyhedra"].items()}
+    if first and not len(ph["shape"]):  # a sphere or clump bed again: as before its first actor
+        del out["polyhedra"], out["polyhedron_shapes"]
+        out.pop("sphere_body_contacts", None)
+        if not is_clumped(out):
+            out["bodies"]["inertia"] = out["bodies"]["inertia"][:, :1].copy()
+        return out
     keep = np.unique(ph["shape"])
     out["polyhedron_shapes"] = ShapeTable.from_group(groups["polyhedron_shapes"]).subset(keep).to_group()
     ph["shape"] = np.searchsorted(keep, ph["shape"]).astype(np.int64)
     out["polyhedra"] = ph
+    if "sphere_body_contacts" in groups:
+        c = groups["sphere_body_contacts"]
+        m = np.asarray(c["body"]) < n
+        out["sphere_body_contacts"] = {k: np.asarray(v)[m].copy() for k, v in c.items()}
     if "body_contacts" in groups:
         c = groups["body_contacts"]
         m = (np.asarray(c["i"]) < n) & (np.asarray(c["j"]) < n)
@@ -130,3 +159,4 @@ def remove_actors(groups):
         m = np.asarray(c["body"]) < n
         out["body_wall_contacts"] = {k: np.asarray(v)[m].copy() for k, v in c.items()}
     return out
+

@@ -112,6 +112,13 @@ def is_polyhedral(groups):
     return len(groups.get("polyhedra", {}).get("shape", ())) > 0
 
 
+def is_clumped(groups):
+    """Whether a sphere scene's bodies are clumps: more spheres than bodies, or a sphere off its
+    body's centre."""
+    s = groups["spheres"]
+    return len(s["radius"]) != len(groups["bodies"]["mass"]) or bool(np.any(np.asarray(s["offset"]) != 0.0))
+
+
 def shape_plugin(groups):
     """The shape plug-in class of a state: MixedShape (spheres and polyhedra), PolyShape or SphereShape."""
     from demcli.engine.mixed_shape import MixedShape, is_mixed

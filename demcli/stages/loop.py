@@ -42,21 +42,16 @@ register(Field("checkpoint/ended", "str", (), "", "present when the stepping had
                writer="stage dem", required=False))
 
 
-def _is_clumped(groups):
-    s = groups["spheres"]
-    return len(s["radius"]) != len(groups["bodies"]["mass"]) or bool(np.any(s["offset"] != 0.0))
-
-
 def make_system(ctx, cfg, groups, time=0.0, step=0, resume=False):
     """System, plan and time-step information for this stage (``resume``: from a checkpoint)."""
     from demcli.engine.plan import make_plan
-    from demcli.engine.system import Dynamics, System
+    from demcli.engine.system import Dynamics, System, is_clumped
 
     walls = build_walls(cfg, ctx.case)
     poly = is_polyhedral(groups)
     declared = declared_effects(cfg, ctx.case.dimension)
     bonded = cfg.get("bonds") is not None or len(groups.get("bonds", {}).get("i", ())) > 0
-    clumped = not poly and _is_clumped(groups)
+    clumped = not poly and is_clumped(groups)
     plan = make_plan(declared, clumps=clumped, walls=len(walls) > 0, polyhedra=poly, bonds=bonded)
     # every effect on a shape it runs on (demcli check refuses the rest already, where it knows the shape)
     check_shape(plan.effects, "polyhedra" if poly else "clumps" if clumped else "spheres", ctx.name)

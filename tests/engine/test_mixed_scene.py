@@ -187,13 +187,18 @@ def test_sphere_pairs_of_a_mixed_scene_follow_the_sphere_law_as_alone():
     np.testing.assert_allclose(mixed.w[:2], alone.w, rtol=1e-12, atol=1e-12)
 
 
+def bed_centres():
+    """3 x 3 x 2 sphere centres [m] (radius R) in a 0.06 m square box."""
+    return np.array([[0.01 + 0.02 * i, 0.01 + 0.02 * j, 0.0105 + 0.021 * k]
+                     for i in range(3) for j in range(3) for k in range(2)])
+
+
 def plate_on_a_bed(load=20.0):
     """3 x 3 x 2 spheres in a box of plane walls and a loaded cuboid plate (an actor) on top:
     (groups, walls, the System's keyword arguments)."""
     from demcli.engine.actors import box_polyhedron
 
-    xs = np.array([[0.01 + 0.02 * i, 0.01 + 0.02 * j, 0.0105 + 0.021 * k]
-                   for i in range(3) for j in range(3) for k in range(2)])
+    xs = bed_centres()
     plate = polyhedra_groups([box_polyhedron([0.058, 0.058, 0.01])], RHO, x=[[0.03, 0.03, 0.048]],
                              flags=np.array([K.FIX_ROTATION | K.FIX_X | K.FIX_Y | K.LOADED], np.int8))
     g = mixed_groups(sphere_groups(xs), plate)
@@ -242,3 +247,34 @@ def test_a_mixed_scene_resumes_from_its_state_groups_bit_for_bit():
     np.testing.assert_array_equal(r.x, s.x)
     np.testing.assert_array_equal(r.L, s.L)
     np.testing.assert_array_equal(r.nl.ft, s.nl.ft)
+
+
+def test_an_actor_added_to_a_sphere_bed_makes_the_mixed_scene_and_removing_it_gives_the_bed_back():
+    from demcli.engine.actors import actor_index, add_actor, box_polyhedron, remove_actors
+
+    # Given: the plate of plate_on_a_bed added by add_actor to the bed of spheres alone
+    ref, box, kw = plate_on_a_bed(20.0)
+    bed = sphere_groups(bed_centres())
+    load = {"load_mean": [0.0, 0.0, -20.0], "load_amplitude": [0.0, 0.0, 0.0], "frequency": 0.0, "phase": 0.0,
+            "start": 0.0}
+    a = add_actor(bed, box_polyhedron([0.058, 0.058, 0.01]), [0.03, 0.03, 0.048], RHO, 0, "plate", load=load)
+    # Then: the groups are those mixed_groups builds (every body a rigid rotor, the plate last)
+    assert actor_index(a, "plate") == 18
+    for grp in ("bodies", "spheres", "polyhedra", "polyhedron_shapes"):
+        assert set(a[grp]) == set(ref[grp]), grp
+        for k in ref[grp]:
+            np.testing.assert_array_equal(a[grp][k], ref[grp][k], err_msg=f"{grp}/{k}")
+    # and the scene runs as a mixed one; once the plate touches the bed, removing it gives back
+    # the spheres' bodies (single spheres again: inertia (n, 1)) without the plate's contacts
+    s = system(a, walls=box, **kw)
+    assert isinstance(s.plugin, MixedShape)
+    s.advance(6000)
+    st = dict(s.groups(), actors=a["actors"])
+    assert len(st["sphere_body_contacts"]["sphere"]) > 0
+    r = remove_actors(st)
+    assert "polyhedra" not in r and "polyhedron_shapes" not in r and "sphere_body_contacts" not in r
+    assert r["bodies"]["inertia"].shape == (18, 1)
+    for k in st["bodies"]:
+        np.testing.assert_array_equal(r["bodies"][k], np.asarray(st["bodies"][k])[:18, :1] if k == "inertia"
+                                      else np.asarray(st["bodies"][k])[:18], err_msg=k)
+    assert type(system(r, walls=box, **kw).plugin).__name__ == "SphereShape"
