@@ -159,4 +159,3 @@ def remove_actors(groups):
         m = np.asarray(c["body"]) < n
         out["body_wall_contacts"] = {k: np.asarray(v)[m].copy() for k, v in c.items()}
     return out
-
