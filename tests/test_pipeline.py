@@ -150,6 +150,7 @@ def test_periodic_checkpoint_survives_a_hard_stop(smoke_case, tmp_path, monkeypa
 
 _LONG = ["--set", "stages.settle.time.steps=100000", "--set", "stages.settle.output.records=2",
          "--set", "stages.settle.output.snapshots=0"]  # chunks of ~0.5 s (a record every 50 000 steps)
+_LONG_OVERRIDES = [v for v in _LONG if v != "--set"]  # the same, as run_case takes them
 
 
 @pytest.fixture(scope="module")
@@ -157,15 +158,13 @@ def long_reference(tmp_path_factory):
     """The uninterrupted long run of the sphere smoke case (the smoke_case fixture's file),
     shared by the signal tests."""
     out = tmp_path_factory.mktemp("long_reference")
-    run_case(SMOKE, out=out, quiet=True,
-             overrides=[v for v in _LONG if v != "--set"])
+    run_case(SMOKE, out=out, quiet=True, overrides=_LONG_OVERRIDES)
     return out / "01-settle.h5"
 
 
 @pytest.mark.parametrize("sig, when", [("SIGTERM", "between"), ("SIGTERM", "during"), ("SIGINT", "during")])
 def test_signal_writes_a_checkpoint(smoke_case, tmp_path, h5_differences, long_reference, sig, when):
     # Given an uninterrupted reference run (long_reference)
-    overrides = [v for v in _LONG if v != "--set"]
     # When `demcli run` gets SIGTERM (a batch system's time limit) or SIGINT (Ctrl-C) in the middle
     # of the dem stage: between two chunks, or while a compiled chunk runs (a process outside
     # sends it 0.1 s into a chunk of ~0.5 s: the stage sizes its chunks to half a second)
@@ -202,7 +201,7 @@ main(["run", {str(smoke_case)!r}, "--out", {str(tmp_path / "run")!r}, "--quiet",
     assert "interrupted" in proc.stderr and "--resume" in proc.stderr and "Traceback" not in proc.stderr, proc.stderr
     assert (tmp_path / "run" / "01-settle.ckpt.h5").exists()
     # and --resume finishes it bit-identically
-    run_case(smoke_case, out=tmp_path / "run", quiet=True, resume=True, overrides=overrides)
+    run_case(smoke_case, out=tmp_path / "run", quiet=True, resume=True, overrides=_LONG_OVERRIDES)
     assert h5_differences(long_reference, tmp_path / "run" / "01-settle.h5") == []
 
 
