@@ -24,8 +24,9 @@ from dataclasses import dataclass, field
 
 from demcli.config.schema import Bool, Float, Optional, Section, Vector
 
-SHAPES = ("spheres", "clumps", "polyhedra")
-"""Body shapes of the engine; ``clumps`` and ``polyhedra`` are also effects, derived from the state."""
+SHAPES = ("spheres", "clumps", "polyhedra", "mixed")
+"""Body shapes of the engine; ``clumps`` and ``polyhedra`` are also effects, derived from the
+state; ``mixed``: spheres or clumps with polyhedra (e.g. a polyhedral plate on a clump bed)."""
 
 SOURCES = ("physics", "dimension", "walls", "bonds", "shape")
 """How an effect becomes active: its key in ``physics``; the case's dimension 2; the stage's
@@ -154,6 +155,8 @@ def effects_table():
 
 _ROLLING_POLY = "a rolling-resistance moment corrects spheres for the shape they lack; polyhedra resist rolling " \
                 "by their faces"
+_PLANAR_POLY = "a 2D scene is made of disks (the polygons stage's sections are discretized into bonded disks); " \
+               "a polyhedron's contact is a 3D overlap volume"
 _DASHPOT_SPHERES = "the sphere laws carry their restitution dashpot always (set restitution 1 for none)"
 
 # in the order of the physics section's keys (docs/cases.md lists them so)
@@ -207,8 +210,7 @@ register(EffectSpec(
     "planar", "2D mode: z and out-of-plane rotations locked (disks, mass per unit thickness)",
     source="dimension", declared_by="dimension: 2", flag="planar",
     passes=("kick:planar_lock",),
-    unsupported={"polyhedra": "a 2D scene is made of disks (the polygons stage's sections are discretized into "
-                              "bonded disks); a polyhedron's contact is a 3D overlap volume"}))
+    unsupported={"polyhedra": _PLANAR_POLY, "mixed": _PLANAR_POLY}))
 register(EffectSpec(
     "bonds", "contact, parallel and Burgers bonds between spheres (declared by a stage that creates them, "
     "derived from a state that holds them)",
@@ -216,7 +218,9 @@ register(EffectSpec(
     fields=(("bond_list", "bond"), ("bond_history", "bond"), ("bond_force", "bond"), ("torque_i", "pair")),
     passes=("bonds:forces", "bonds:gather", "kick:rotation"), counters=("bonds",),
     unsupported={"polyhedra": "the bond models (contact, parallel, Burgers) are defined on sphere radii and "
-                              "centre lines"}))
+                              "centre lines",
+                 "mixed": "bonds join the spheres of a spheres-only scene (their pair lists and the bond "
+                          "pass are the sphere plug-in's)"}))
 register(EffectSpec(
     "clumps", "rigid bodies of several spheres (derived from the state, not declared)",
     source="shape", flag="clumps",

@@ -243,13 +243,16 @@ def _check_wall_mode(wall_type, motion, where, report):
         report(f"{where}.area", "a servo plane needs its loaded area (only box faces know theirs)")
 
 
-def scene_check(cfg, case, k, scene, report):
+def scene_check(cfg, case, k, scene, report, shapes=None):
     """The stage's effects against the shape of its input's bodies, known from the earlier
-    stages' outputs (polyhedra, or spheres which may be clumps): each effect the registry
-    does not run on that shape is refused with its reason (:func:`demcli.effects.shape_refusals`)."""
+    stages' outputs (polyhedra, or spheres which may be clumps; ``shapes``: the shapes the
+    stage may run instead, e.g. mixed for a stage that sets a polyhedral actor on a sphere bed):
+    each effect the registry runs on none of them is refused with its reason
+    (:func:`demcli.effects.shape_refusals`)."""
     if scene is None:
         return
-    shapes = ("polyhedra",) if has_field(scene, "polyhedra/shape") else ("spheres", "clumps")
+    if shapes is None:
+        shapes = ("polyhedra",) if has_field(scene, "polyhedra/shape") else ("spheres", "clumps")
     names = stage_effects(cfg, case.dimension, bonded=has_field(scene, "bonds/i"))
     for spec, msg in shape_refusals(names, shapes):
         if spec.key:
@@ -258,7 +261,7 @@ def scene_check(cfg, case, k, scene, report):
             report("bonds", msg)
         else:
             report("", f"{spec.declared_by} (effect {spec.name}) {msg}")
-    if shapes == ("polyhedra",):
+    if set(shapes) <= {"polyhedra", "mixed"}:
         for k, w in enumerate(cfg.get("walls", ())):
             if w.type == "cylinder":
                 report(f"walls.{k}.type", "is not for polyhedra: their wall contact is the overlap with a "
@@ -390,30 +393,38 @@ def set_bond_models(ctx, bonds_cfg, system, groups=None):
     system.bonds.set_models(pairs, rows)
 
 
-def is_polyhedral(groups):
-    """Whether the scene of state ``groups`` is made of polyhedral bodies."""
-    return "polyhedra" in groups and len(groups["bodies"]["mass"]) > 0
+def scene_shape(groups):
+    """The bodies' shape in the effect registry's words (:data:`demcli.effects.SHAPES`):
+    spheres, clumps, polyhedra, or mixed (spheres or clumps with polyhedra)."""
+    from demcli.engine.mixed_shape import is_mixed
+    from demcli.engine.system import is_clumped, is_polyhedral
+
+    if is_mixed(groups):
+        return "mixed"
+    if is_polyhedral(groups):
+        return "polyhedra"
+    return "clumps" if is_clumped(groups) else "spheres"
 
 
 def particle_support(groups, normal):
     """min over the particles' points p of p . normal [m]: where a plane with this normal
     (into the domain) first touches them (spheres and clumps: their surfaces; polyhedra:
     their vertices; the loading actors of a ballast stage are left out). inf for none."""
-    n = np.asarray(normal, float)
-    if is_polyhedral(groups):
-        from demcli.engine.actors import remove_actors
-        from demcli.state import State
-        from demcli.state.polyhedra import world_vertices
-
-        v, _ = world_vertices(State(groups=remove_actors(groups)))
-        return float((v @ n).min()) if len(v) else math.inf
-    s = groups["spheres"]
-    if not len(s["radius"]):
-        return math.inf
+    from demcli.engine.actors import remove_actors
     from demcli.state import State
+    from demcli.state.polyhedra import world_vertices
 
-    c = State(groups={"bodies": groups["bodies"], "spheres": s}).sphere_centres()
-    return float((c @ n - np.asarray(s["radius"], float)).min())
+    n = np.asarray(normal, float)
+    groups = remove_actors(groups)
+    out = math.inf
+    if len(groups.get("polyhedra", {}).get("shape", ())):
+        v, _ = world_vertices(State(groups=groups))
+        out = float((v @ n).min()) if len(v) else math.inf
+    s = groups.get("spheres", {})
+    if len(s.get("radius", ())):
+        c = State(groups={"bodies": groups["bodies"], "spheres": s}).sphere_centres()
+        out = min(out, float((c @ n - np.asarray(s["radius"], float)).min()))
+    return out
 
 
 def lay_walls(cfg, wpoint, groups):

@@ -19,10 +19,10 @@ import numpy as np
 
 from demcli import interrupts
 from demcli.effects import check_shape
-from demcli.errors import StageError
+from demcli.errors import InputError, StageError
 from demcli.progress import StopForecast
-from demcli.stages.dem import (build_walls, case_materials, contact_model, declared_effects, is_polyhedral, lay_walls,
-                               phase_models, set_bond_models)
+from demcli.stages.dem import (build_walls, case_materials, contact_model, declared_effects, lay_walls, phase_models,
+                               scene_shape, set_bond_models)
 from demcli.stages.timing import stage_time_step, step_count
 from demcli.stepping import Stepper
 from demcli.state.fields import Field, register, register_group
@@ -45,16 +45,20 @@ register(Field("checkpoint/ended", "str", (), "", "present when the stepping had
 def make_system(ctx, cfg, groups, time=0.0, step=0, resume=False):
     """System, plan and time-step information for this stage (``resume``: from a checkpoint)."""
     from demcli.engine.plan import make_plan
-    from demcli.engine.system import Dynamics, System, is_clumped
+    from demcli.engine.system import Dynamics, System
+    from demcli.kernels.walls import PLANE
 
     walls = build_walls(cfg, ctx.case)
-    poly = is_polyhedral(groups)
+    shape = scene_shape(groups)
     declared = declared_effects(cfg, ctx.case.dimension)
     bonded = cfg.get("bonds") is not None or len(groups.get("bonds", {}).get("i", ())) > 0
-    clumped = not poly and is_clumped(groups)
-    plan = make_plan(declared, clumps=clumped, walls=len(walls) > 0, polyhedra=poly, bonds=bonded)
+    plan = make_plan(declared, clumps=shape == "clumps", walls=len(walls) > 0, polyhedra=shape == "polyhedra",
+                     bonds=bonded)
     # every effect on a shape it runs on (demcli check refuses the rest already, where it knows the shape)
-    check_shape(plan.effects, "polyhedra" if poly else "clumps" if clumped else "spheres", ctx.name)
+    check_shape(plan.effects, shape, ctx.name)
+    if shape in ("polyhedra", "mixed") and np.any(np.asarray(walls.kind) != PLANE):
+        raise InputError(f"stage {ctx.name}: walls: a scene with polyhedra takes plane and box walls only "
+                         "(a polyhedron's wall contact is its overlap with a half-space)")
     p = cfg.physics
     dyn = Dynamics(gravity=tuple(p.gravity) if p.gravity is not None else (0.0, 0.0, 0.0),
                    local_damping=p.local_damping or 0.0, viscous_damping=p.viscous_damping or 0.0,
@@ -89,36 +93,38 @@ def make_system(ctx, cfg, groups, time=0.0, step=0, resume=False):
 
 
 class StageSnapshots:
-    """Sphere or polyhedron snapshots plus walls, one ``write(state)`` and ``truncate(time)``."""
+    """Sphere and polyhedron snapshots plus walls (a mixed scene writes both series, numbered
+    alike), one ``write(state)`` and ``truncate(time)``."""
 
-    def __init__(self, folder, polyhedra, resume):
+    def __init__(self, folder, shape, resume):
         from demcli.state.vtu import PvdSeries, Snapshots
+        from demcli.state.vtu_poly import PolyhedraSnapshots
 
-        if polyhedra:
-            from demcli.state.vtu_poly import PolyhedraSnapshots
-
-            self.bodies = PolyhedraSnapshots(folder, resume=resume)
-            self.walls = PvdSeries(Path(folder) / "walls.pvd", resume=resume)
-        else:
-            self.bodies = Snapshots(folder, resume=resume)
-            self.walls = None
         self.folder = Path(folder)
+        # the sphere series writes the walls (and bonds) beside its spheres
+        self.spheres = Snapshots(folder, resume=resume) if shape != "polyhedra" else None
+        self.polyhedra = PolyhedraSnapshots(folder, resume=resume) if shape in ("polyhedra", "mixed") else None
+        self.walls = PvdSeries(self.folder / "walls.pvd", resume=resume) if self.spheres is None else None
 
     def write(self, state):
         from demcli.state.vtu import write_walls_vtu
 
-        self.bodies.write(state)
+        if self.spheres is not None:
+            self.spheres.write(state)
+        if self.polyhedra is not None:
+            self.polyhedra.write(state)
         if self.walls is not None and "walls/kind" in state and len(state["walls/kind"]):
-            path = write_walls_vtu(self.folder / f"walls_{self.bodies.count - 1:06d}.vtu", state)
+            path = write_walls_vtu(self.folder / f"walls_{self.polyhedra.count - 1:06d}.vtu", state)
             self.walls.add(float(state.meta.get("time", 0.0)), path)
 
     def truncate(self, time):
-        if self.walls is None:
-            self.bodies.truncate(time)
-        else:
-            self.bodies.series.truncate(time)
+        if self.spheres is not None:
+            self.spheres.truncate(time)
+        if self.polyhedra is not None:
+            self.polyhedra.series.truncate(time)
+            self.polyhedra.count = len(self.polyhedra.series)
+        if self.walls is not None:
             self.walls.truncate(time)
-            self.bodies.count = len(self.bodies.series)
 
 
 def body_radii(system):
@@ -222,7 +228,7 @@ def integrate(ctx, cfg, state_in, hooks=None):
     table, wtable = _tables(ckpt, system, plan, hooks)
     ended = None if ckpt is None else ckpt.groups["checkpoint"].get("ended")  # the loop had ended: why
     ended = None if ended is None else str(ended)
-    snaps = StageSnapshots(ctx.snapshot_dir, plan.has("polyhedra"), resume=ckpt is not None)
+    snaps = StageSnapshots(ctx.snapshot_dir, system.plugin.name, resume=ckpt is not None)
     if ckpt is not None:  # a checkpoint of the loop's end writes the final snapshot again
         snaps.truncate(system.time if ended is None else math.nextafter(system.time, -math.inf))
     nb = len(system.mass)

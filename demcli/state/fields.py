@@ -478,6 +478,21 @@ def _meta_problem(fld: Field, value):
     return None
 
 
+def _shape_rows_problems(sizes):
+    """The polyhedral bodies (``n_pb``, the last of the bodies) are at most all bodies, and all
+    of them when the state has no spheres (every body has a shape)."""
+    n_p, where = sizes.get("n_pb", (None, ""))
+    if n_p is None:
+        return []
+    n_b, n_s = sizes.get("n_b", (0, ""))[0], sizes.get("n_s", (0, ""))[0]
+    if n_p > n_b:
+        return [f"{where!r} has {n_p} polyhedra but the state has {n_b} bodies"]
+    if n_s == 0 and n_p < n_b:
+        return [f"{where!r} has {n_p} polyhedra for {n_b} bodies and there are no spheres: "
+                f"{n_b - n_p} bodies have no shape"]
+    return []
+
+
 def check(state: State, *, values: bool = True, stored: bool = False) -> list[str]:
     """All problems of a state against the registry (empty list: valid).
 
@@ -503,6 +518,7 @@ def check(state: State, *, values: bool = True, stored: bool = False) -> list[st
             problems += _check_group(state, gname, effects, stored, sizes, shaped)
         elif grp.required:
             problems.append(f"missing group {gname!r} ({grp.doc}; written by {grp.writer})")
+    problems += _shape_rows_problems(sizes)
     for fld, arr in shaped:
         if fld.index_of and arr.size:  # a dim no field of the state has is of size 0
             n = sizes.get(fld.index_of, (0, ""))[0]

@@ -7,10 +7,11 @@ Layout (registered below; see docs/state.md):
   The body frame of a polyhedron is its principal frame: centroid at the origin, axes
   along the principal axes of inertia with ascending moments, so ``bodies/inertia``
   is diagonal in it.
-- ``polyhedra/*``: one row per body (dims ``n_b``): the template ``shape``, the
-  ``material``, and what the assembly knows about it (size class, sieve size,
-  library entry, flaky and elongated flags). When the group exists every body is a
-  polyhedron; ``spheres`` is then empty (``n_s = 0``).
+- ``polyhedra/*``: one row per polyhedral body (dims ``n_pb``), the polyhedra being the last
+  ``n_pb`` bodies in body order: the template ``shape``, the ``material``, and what the
+  assembly knows about it (size class, sieve size, library entry, flaky and elongated
+  flags). Without spheres (``n_s = 0``) every body is a polyhedron (``n_pb = n_b``); a mixed
+  scene (:mod:`demcli.engine.mixed_shape`) has its sphere bodies first.
 - ``polyhedron_shapes/*``: the templates, in the body frame, as CSR tables that a
   numba kernel indexes directly. Shape k has vertices
   ``vertices[vertex_start[k]:vertex_start[k + 1]]``, faces
@@ -35,13 +36,13 @@ from demcli.state.fields import Field, register, register_group
 register_group("polyhedra", "Rigid convex polyhedra, one row per body (shapes in polyhedron_shapes)",
                writer="stage assemble")
 for _name, _kind, _dims, _unit, _doc, _kw in [
-        ("shape", "i", ("n_b",), "", "template of the body in polyhedron_shapes", {"index_of": "n_shape"}),
-        ("material", "i", ("n_b",), "", "index into materials", {"index_of": "n_m"}),
-        ("size_class", "i", ("n_b",), "", "index into gradation/class_* (-1: none)", {}),
-        ("sieve_size", "f", ("n_b",), "m", "square-hole sieve size (projection method)", {}),
-        ("library_index", "i", ("n_b",), "", "entry in the ballast library the body came from (-1: none)", {}),
-        ("flaky", "b", ("n_b",), "", "short side < flaky_ratio x the class's mean size", {}),
-        ("elongated", "b", ("n_b",), "", "length > elongated_ratio x the class's mean size (needle)", {})]:
+        ("shape", "i", ("n_pb",), "", "template of the body in polyhedron_shapes", {"index_of": "n_shape"}),
+        ("material", "i", ("n_pb",), "", "index into materials", {"index_of": "n_m"}),
+        ("size_class", "i", ("n_pb",), "", "index into gradation/class_* (-1: none)", {}),
+        ("sieve_size", "f", ("n_pb",), "m", "square-hole sieve size (projection method)", {}),
+        ("library_index", "i", ("n_pb",), "", "entry in the ballast library the body came from (-1: none)", {}),
+        ("flaky", "b", ("n_pb",), "", "short side < flaky_ratio x the class's mean size", {}),
+        ("elongated", "b", ("n_pb",), "", "length > elongated_ratio x the class's mean size (needle)", {})]:
     register(Field(f"polyhedra/{_name}", _kind, _dims, _unit, _doc, writer="stage assemble", **_kw))
 
 register_group("polyhedron_shapes", "Convex polyhedron templates in the body (principal) frame, CSR tables",
@@ -266,12 +267,19 @@ def rotation_matrices(q):
         np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], axis=1)], axis=1)
 
 
+def first_polyhedral_body(state):
+    """Body index of the first polyhedron: the polyhedra are the last bodies, one row of
+    ``polyhedra`` each in body order (0 in a polyhedra-only scene; after the sphere bodies in a
+    mixed one)."""
+    return len(state["bodies/mass"]) - len(state["polyhedra/shape"])
+
+
 def world_vertices(state):
     """(vertices (n_v, 3) in the world frame, owner body (n_v,)) of every polyhedral body."""
     table = ShapeTable.from_group(state.groups["polyhedron_shapes"])
     shape = np.asarray(state["polyhedra/shape"], dtype=np.int64)
     sub = table.subset(shape)
-    owner = np.repeat(np.arange(len(shape)), np.diff(sub.vertex_start))
+    owner = np.repeat(np.arange(len(shape)), np.diff(sub.vertex_start)) + first_polyhedral_body(state)
     rot = rotation_matrices(state["bodies/q"])
     x = np.asarray(state["bodies/x"], dtype=np.float64)
     return np.einsum("nij,nj->ni", rot[owner], sub.vertices) + x[owner], owner
@@ -282,11 +290,12 @@ def body_convex(state, b, table=None):
     from demcli.geometry.intersect import Convex
 
     table = table if table is not None else ShapeTable.from_group(state.groups["polyhedron_shapes"])
-    v, _, normals, _, edges = table.shape(int(state["polyhedra/shape"][b]))
+    v, _, normals, _, edges = table.shape(int(state["polyhedra/shape"][b - first_polyhedral_body(state)]))
     rot = rotation_matrices(state["bodies/q"][b])[0]
     d = v[edges[:, 1]] - v[edges[:, 0]]
     d /= np.linalg.norm(d, axis=1)[:, None]
     return Convex(v @ rot.T + np.asarray(state["bodies/x"][b], dtype=np.float64), normals @ rot.T, d @ rot.T)
 
 
-__all__ = ["SHAPE_FIELDS", "ShapeTable", "body_convex", "rotation_matrices", "world_vertices"]
+__all__ = ["SHAPE_FIELDS", "ShapeTable", "body_convex", "first_polyhedral_body", "rotation_matrices",
+           "world_vertices"]

@@ -16,7 +16,7 @@ from pathlib import Path
 import meshio
 import numpy as np
 
-from demcli.state.polyhedra import ShapeTable, rotation_matrices
+from demcli.state.polyhedra import ShapeTable, first_polyhedral_body, rotation_matrices
 from demcli.state.vtu import PvdSeries, _write_mesh
 
 
@@ -38,15 +38,17 @@ def polyhedra_mesh(state) -> meshio.Mesh:
     shape = np.asarray(state["polyhedra/shape"], dtype=np.int64)
     sub = table.subset(shape)  # one copy of the template per body, in body order
     n = len(shape)
+    b0 = first_polyhedral_body(state)  # a mixed scene's polyhedra follow its sphere bodies
     owner = np.repeat(np.arange(n), np.diff(sub.vertex_start))
-    rot = rotation_matrices(state["bodies/q"]) if n else np.zeros((0, 3, 3))
-    x = np.asarray(state["bodies/x"], dtype=np.float64)
+    rot = rotation_matrices(state["bodies/q"][b0:]) if n else np.zeros((0, 3, 3))
+    x = np.asarray(state["bodies/x"], dtype=np.float64)[b0:]
     points = np.einsum("nij,nj->ni", rot[owner], sub.vertices) + x[owner] if n else np.zeros((0, 3))
-    tri, body = _fan_triangles(sub)
+    tri, row = _fan_triangles(sub)
+    body = row + b0
     v = np.asarray(state["bodies/v"], dtype=np.float64)
 
     def per_body(name, dtype):
-        return [np.asarray(state[f"polyhedra/{name}"]).astype(dtype)[body]]
+        return [np.asarray(state[f"polyhedra/{name}"]).astype(dtype)[row]]
 
     cell_data = {
         "body": [body],

@@ -285,7 +285,7 @@ def run_prepare(ctx, cfg, state_in):
                              "coordination": np.float64(z), "isotropic_stress": np.float64(p)}
     table.to_state(st)
     ctx.write_records(table, x="steps", ys=["isotropic_stress"], logy=True)
-    snaps = loop.StageSnapshots(ctx.snapshot_dir, False, resume=False)
+    snaps = loop.StageSnapshots(ctx.snapshot_dir, "spheres", resume=False)
     snaps.write(st)
     return st
 

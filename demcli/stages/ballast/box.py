@@ -1,13 +1,20 @@
 """Ballast box stages (seed 002, Shao, Lian & Yang 2017, sec. 4): ``deposit``, ``vibrate``, ``sleeper``.
 
-All three run the polyhedral engine through the ``dem`` stage loop
+All three run the body engine through the ``dem`` stage loop
 (:func:`demcli.stages.loop.integrate`) and take every key of a ``dem`` stage
 (physics, contact, walls, time, output, neighbors, scaling, safety); their walls must
 include one ``box`` wall, the ballast box. They carry the ``gradation`` and ``library``
 groups of their input forward, so that a later stage can draw more ballast.
 
+The bed may be polyhedra, clumps of spheres (``clumpify``) or spheres: the plate and the
+sleeper are polyhedral actors either way, so on a sphere or clump bed the loaded stages run a
+mixed scene (:mod:`demcli.engine.mixed_shape`). The shoulders are filled with polyhedra, so
+a sphere or clump bed takes ``shoulders.fill: false``. The bed's top is the highest vertex
+of a polyhedron or the top of a sphere (:func:`top_points`).
+
 Bed measures (:func:`bed_measures`), with M the particles' mass (volume x material
-density, never the scaled mass), A the box floor area and h a bed height:
+density, never the scaled mass; a clump's mass is its polyhedron's), A the box floor area
+and h a bed height:
 bulk density rho_b = M / (A h); porosity n = 1 - rho_b / rho_s with rho_s the mass-
 weighted particle density; void ratio e = n / (1 - n).
 
@@ -43,7 +50,7 @@ import numpy as np
 from demcli.config.schema import Bool, Float, Int, Node, Optional, Section, Str, Vector
 from demcli.errors import InputError
 from demcli.stages import dem, loop
-from demcli.stages.base import ENGINE_KEEPS, ENGINE_OUTPUT, StageType, register_stage
+from demcli.stages.base import ENGINE_KEEPS, ENGINE_OUTPUT, StageType, has_field, register_stage
 from demcli.state.fields import Field, register, register_group
 from demcli.state.records import describe_column
 
@@ -139,10 +146,20 @@ def particles(groups):
 def particle_mass(groups, case):
     """(mass [kg], mass-weighted particle density [kg/m^3]) of the ballast particles."""
     idx = particles(groups)
-    vol = np.asarray(groups["polyhedron_shapes"]["volume"])[np.asarray(groups["polyhedra"]["shape"])[idx]]
-    dens = np.array([m.density for m in case.materials.values()])[np.asarray(groups["polyhedra"]["material"])[idx]]
-    m = float((vol * dens).sum())
-    return m, m / float(vol.sum()) if len(idx) else 0.0
+    density = np.array([m.density for m in case.materials.values()])
+    if not len(groups.get("spheres", {}).get("radius", ())):  # polyhedra: volume x density
+        vol = np.asarray(groups["polyhedron_shapes"]["volume"])[np.asarray(groups["polyhedra"]["shape"])[idx]]
+        dens = density[np.asarray(groups["polyhedra"]["material"])[idx]]
+        m = float((vol * dens).sum())
+        return m, m / float(vol.sum()) if len(idx) else 0.0
+    # spheres and clumps: the bodies' mass (a clump keeps its polyhedron's, V rho), the
+    # density of their spheres' material
+    sp = groups["spheres"]
+    mat = np.zeros(len(groups["bodies"]["mass"]), np.int64)
+    mat[np.asarray(sp["body"], np.int64)] = np.asarray(sp["material"], np.int64)
+    mass = np.asarray(groups["bodies"]["mass"], float)[idx]
+    m = float(mass.sum())
+    return m, m / float((mass / density[mat[idx]]).sum()) if len(idx) else 0.0
 
 
 def bed_measures(mass, rho_s, area, height):
@@ -188,14 +205,29 @@ def cycle_response(cycle, z):
 LAG_WARNING = 0.1  # cycles: a loading device lagging the load more than this is logged as dynamic
 
 
-def surface_height(groups, lo, hi, cell):
-    """Mean over the (x, y) columns of width ``cell`` of the box of the highest particle point [m]."""
+def top_points(groups):
+    """Points of the ballast particles (no actors) whose highest ones bound the bed from above
+    [m]: the world vertices of polyhedra; the top of each sphere (centre + r e_z, taken in the
+    column of its centre)."""
     from demcli.state import State
     from demcli.state.polyhedra import world_vertices
 
+    n = len(particles(groups))
     st = State(groups=groups)
-    v, owner = world_vertices(st)
-    v = v[owner < len(particles(groups))]
+    out = []
+    if len(groups.get("polyhedra", {}).get("shape", ())):
+        v, owner = world_vertices(st)
+        out.append(v[owner < n])
+    sp = groups.get("spheres", {})
+    if len(sp.get("radius", ())):
+        top = st.sphere_centres() + np.outer(np.asarray(sp["radius"], float), [0.0, 0.0, 1.0])
+        out.append(top[np.asarray(sp["body"], np.int64) < n])
+    return np.concatenate(out) if out else np.zeros((0, 3))
+
+
+def surface_height(groups, lo, hi, cell):
+    """Mean over the (x, y) columns of width ``cell`` of the box of the highest particle point [m]."""
+    v = top_points(groups)
     n = np.maximum(1, np.floor((hi[:2] - lo[:2]) / cell).astype(int))
     ij = np.clip(((v[:, :2] - lo[:2]) / (hi[:2] - lo[:2]) * n).astype(int), 0, n - 1)
     top = np.full(n[0] * n[1], -np.inf)
@@ -204,10 +236,19 @@ def surface_height(groups, lo, hi, cell):
     return float(top.mean()) - lo[2] if len(top) else 0.0
 
 
-def _median_size(groups):
-    s = np.asarray(groups["polyhedra"]["sieve_size"])[particles(groups)]
-    s = s[s > 0]
-    return float(np.median(s)) if len(s) else 2.0 * float(np.median(groups["polyhedron_shapes"]["radius"]))
+def _median_size(groups, case):
+    """Median sieve size of the particles [m] (polyhedra; clumps from polyhedra keep theirs); else
+    the median diameter of the sphere of equal volume (spheres, clumps without sieve sizes)."""
+    idx = particles(groups)
+    if not len(groups.get("spheres", {}).get("radius", ())):
+        s = np.asarray(groups["polyhedra"]["sieve_size"])[idx]
+        s = s[s > 0]
+        return float(np.median(s)) if len(s) else 2.0 * float(np.median(groups["polyhedron_shapes"]["radius"]))
+    s = np.asarray(groups.get("clumps", {}).get("sieve_size", ()), float)
+    if len(s) == len(groups["bodies"]["mass"]) and np.all(s[idx] > 0):
+        return float(np.median(s[idx]))
+    mass, rho_s = particle_mass(groups, case)
+    return float(np.median(np.cbrt(6.0 / math.pi * np.asarray(groups["bodies"]["mass"], float)[idx] / rho_s)))
 
 
 def _carry(state, state_in):
@@ -235,7 +276,7 @@ def run_deposit(ctx, cfg, state_in):
     lo, hi = box_wall(cfg)
     area = float(np.prod(hi[:2] - lo[:2]))
     mass, rho_s = particle_mass(state_in.groups, ctx.case)
-    cell = _median_size(state_in.groups)
+    cell = _median_size(state_in.groups, ctx.case)
 
     def row(system):
         h = surface_height(system.groups(), lo, hi, cell)
@@ -347,8 +388,11 @@ def _cyclic(ctx, cfg, state_in, actor, measure, columns, stop=None, finish_extra
 
 def _actor_bottom(groups, b):
     """Lowest point of actor b [m]."""
+    from demcli.state import State
+    from demcli.state.polyhedra import first_polyhedral_body
+
     sh = groups["polyhedron_shapes"]
-    k = int(groups["polyhedra"]["shape"][b])
+    k = int(groups["polyhedra"]["shape"][b - first_polyhedral_body(State(groups=groups))])
     v = np.asarray(sh["vertices"])[sh["vertex_start"][k]:sh["vertex_start"][k + 1]]
     from demcli.state.polyhedra import rotation_matrices
 
@@ -418,11 +462,7 @@ def run_vibrate(ctx, cfg, state_in):
 
 
 def _top(groups):
-    from demcli.state import State
-    from demcli.state.polyhedra import world_vertices
-
-    v, owner = world_vertices(State(groups=groups))
-    v = v[owner < len(particles(groups))]
+    v = top_points(groups)
     return float(v[:, 2].max()) if len(v) else 0.0
 
 
@@ -506,6 +546,9 @@ def run_sleeper(ctx, cfg, state_in):
     s_lo = np.r_[cxy - 0.5 * size[:2], bed]
     s_hi = np.r_[cxy + 0.5 * size[:2], bed + size[2]]
     sh = cfg.shoulders
+    if sh.fill and len(groups.get("spheres", {}).get("radius", ())):
+        raise InputError(f"stage {ctx.name}: shoulders.fill: the shoulder ballast is drawn as polyhedra, and this "
+                         "bed is made of spheres or clumps (set shoulders.fill: false)")
     if sh.fill:
         top_fill = sh.height if sh.height is not None else s_hi[2]
         if not top_fill > bed:
@@ -555,11 +598,7 @@ def run_sleeper(ctx, cfg, state_in):
 
 def _top_in(groups, lo, hi):
     """Highest particle point above the (x, y) rectangle lo-hi [m] (the box floor if none)."""
-    from demcli.state import State
-    from demcli.state.polyhedra import world_vertices
-
-    v, owner = world_vertices(State(groups=groups))
-    v = v[owner < len(particles(groups))]
+    v = top_points(groups)
     m = (v[:, 0] >= lo[0]) & (v[:, 0] <= hi[0]) & (v[:, 1] >= lo[1]) & (v[:, 1] <= hi[1])
     return float(v[m, 2].max()) if m.any() else float(lo[2])
 
@@ -611,7 +650,7 @@ SLEEPER.update({
 
 def _describe(kind):
     def describe(cfg, case):
-        plan = dem.plan_summary(case, cfg, {"polyhedra": True})
+        plan = dem.plan_summary(case, cfg, {"polyhedra": True})  # (the bed's shape is known at run time)
         lines = plan.describe().splitlines()
         if kind != "deposit":
             ld = cfg.load
@@ -632,12 +671,26 @@ def _shoulder_inputs(cfg):
                                "library/generator")} if cfg.shoulders.fill else {}
 
 
-_IO = dict(requires=("bodies/x", "polyhedra/shape"), keeps=CARRIED + ENGINE_KEEPS, case_check=dem.scene_check,
+def _actor_scene_check(cfg, case, k, scene, report):
+    """:func:`dem.scene_check` for a stage that sets a polyhedral actor on its bed: the scene
+    runs as polyhedra (a polyhedral bed) or mixed (a sphere or clump bed, or one that already
+    had an actor); shoulders are drawn as polyhedra, so a sphere bed takes none."""
+    poly = has_field(scene, "polyhedra/shape") if scene is not None else True
+    dem.scene_check(cfg, case, k, scene, report, shapes=("polyhedra", "mixed") if poly else ("mixed",))
+    if not poly and cfg.get("shoulders") is not None and cfg.shoulders.fill:
+        report("shoulders.fill", "the shoulder ballast is drawn as polyhedra, and this bed is made of spheres or "
+               "clumps (set shoulders.fill: false)", True)
+
+
+_IO = dict(requires=("bodies/x",), keeps=CARRIED + ENGINE_KEEPS,
            provides=ENGINE_OUTPUT + ("polyhedra/*", "polyhedron_shapes/*", "bed/*"))
 register_stage(StageType("deposit", DEPOSIT, run_deposit, check=_check_deposit, describe=_describe("deposit"), **_IO,
-                         doc="gravity deposition of a polyhedral bed until at rest; bulk density and porosity"))
+                         case_check=dem.scene_check,
+                         doc="gravity deposition of a ballast bed (polyhedra, clumps or spheres) until at rest; "
+                             "bulk density and porosity"))
 register_stage(StageType("vibrate", VIBRATE, run_vibrate, check=_check_cyclic, describe=_describe("vibrate"), **_IO,
+                         case_check=_actor_scene_check,
                          doc="plate vibration compaction: density and void ratio per cycle (seed 002)"))
 register_stage(StageType("sleeper", SLEEPER, run_sleeper, check=_check_cyclic, describe=_describe("sleeper"), **_IO,
-                         config_requires=_shoulder_inputs,
+                         case_check=_actor_scene_check, config_requires=_shoulder_inputs,
                          doc="sleeper on the compacted bed, shoulders filled, cyclic load: settlement per cycle"))
