@@ -16,6 +16,7 @@ import numpy as np
 
 from demcli.kernels import layout as K
 from demcli.kernels import motion as M
+from demcli.kernels.switch import static_mask
 from demcli.kernels.walls import N_WPARAMS
 
 # adaptive damping: initial alpha (seed 002: 0.1 1/s)
@@ -296,11 +297,12 @@ class System:
 
         self.adamp[M.A_MAX] = self.alpha_bounds[1] / self.dt if self.dt > 0 else math.inf
         bonds, bprm = self.plugin.bond_arrays(self)
+        static = static_mask(self.flags)
         status, done, self.time, self.nl = run_steps(
             int(nsteps), self.time, self.flags, self.prm, self.kernel_params(), self.kernel_bodies(),
             self.plugin.geometry(self), self.plugin.members(self), self.kernel_walls(), self.nl, bonds, bprm,
             self.adamp, self.esph, self.ebody, self.eacc, self.counters, self.info, self._fresh_lists, self.step,
-            self.prime)
+            self.prime, *([static] if static else []))  # none on: omitted, compiled as constants
         self._fresh_lists = False
         self.prime = False
         self.step += int(done)

@@ -40,7 +40,7 @@ from demcli.kernels.layout import (BAD_ENERGY, BAD_NUMBER, BAD_OVERLAP, C_BODY, 
                                    F_VISCOUS, OK)
 from demcli.kernels.neighbors import add_actor_pairs, build_pairs, build_reverse, build_wall_pairs, carry_history
 from demcli.kernels.shapes import pair_pass, place, primitives, spin_rotors, volumetric, wall_pass, worst_overlap
-from demcli.kernels.switch import choose
+from demcli.kernels.switch import choose, on
 
 
 @njit
@@ -118,7 +118,6 @@ def gather(bd, L, fs, ts, own, nl, par, flags, sw, gs, dt, frow, trow, erow, esp
     gs: (pair_torque, torque, fuse_next); dt: the contact step (0 when priming).
     """
     pair_torque, torque, fuse_next = gs
-    energy = flags[F_ENERGY]
     h = 0.5 * dt
     cc = M.damping_factors(alpha, h)
     rstart = nl.rstart
@@ -131,12 +130,14 @@ def gather(bd, L, fs, ts, own, nl, par, flags, sw, gs, dt, frow, trow, erow, esp
     wfc = nl.wfc
     wtq = nl.wtq
     wen = nl.wen
-    rotate_body = sw[4]
-    planar = sw[5]
+    rotate_body = sw[2]
+    static = sw[3]
     # arrays taken out of the tuples before the parallel loop (see kernels/shapes/__init__.py)
     x, v, w, q, _, f, tq, mass, inert, bflags, load = bd
     gravity, damping = par.gravity, (par.local, par.visc)
     for i in prange(frow.shape[0]):
+        energy = on(static, F_ENERGY)  # constants inside the loop (static: the literal mask)
+        planar = on(static, F_PLANAR)
         fx = frow[i, 0]
         fy = frow[i, 1]
         fz = frow[i, 2]
@@ -290,7 +291,7 @@ def _count_effects(counters, flags, adaptive):
 
 @njit
 def run_steps(nsteps, time, flags, prm, par, bd, g, mb, wa, nl, bonds, bprm, adamp, esph, ebody, eacc,
-              counters, info, force_rebuild, step0, prime):
+              counters, info, force_rebuild, step0, prime, static=0):
     """Advance ``nsteps`` steps; returns (status, steps_done, time, nl).
 
     Args:
@@ -314,15 +315,19 @@ def run_steps(nsteps, time, flags, prm, par, bd, g, mb, wa, nl, bonds, bprm, ada
         prime: before the first step, evaluate the loads at the current state with a step of
             zero length (no motion, no history or energy increments), so the first half kick
             uses F(x_0) (a fresh stage; a resumed one keeps its stored loads).
+        static: ``switch.static_mask(flags)``, the rarely-on switches of
+            :data:`demcli.kernels.switch.STATIC` as one int; omitted when none is on, so that
+            numba compiles the scene with them as constants (at most two variants per scene
+            type: this one and the run-time one).
     """
     dt = par.dt
     clumps = flags[F_CLUMPS]
     friction = flags[F_FRICTION]
     rolling = flags[F_ROLLING]
-    energy = flags[F_ENERGY]
+    energy = on(static, F_ENERGY)
     bonded = flags[F_BONDS]
-    adaptive = flags[F_ADAPTIVE]
-    planar = flags[F_PLANAR]
+    adaptive = on(static, F_ADAPTIVE)
+    planar = on(static, F_PLANAR)
     vol = volumetric(g)
     Lr = M.rotors(spin_rotors(g, mb, nl.xref), bd.L)  # None for spin rotors: the rotor switch
     rigid = Lr is not None
@@ -330,7 +335,7 @@ def run_steps(nsteps, time, flags, prm, par, bd, g, mb, wa, nl, bonds, bprm, ada
     pair_torque = friction or rolling or vol
     torque = pair_torque or bonded
     body_prims = not clumps
-    sw = (flags[F_GRAVITY], flags[F_LOCAL], flags[F_VISCOUS], energy, rotate_body, planar, adaptive)
+    sw = (flags[F_GRAVITY], flags[F_LOCAL], rotate_body, static)
     nb = bd.x.shape[0]
     nw = wa.v.shape[0]
     lim2 = (0.5 * par.skin) ** 2
@@ -359,7 +364,7 @@ def run_steps(nsteps, time, flags, prm, par, bd, g, mb, wa, nl, bonds, bprm, ada
             drifted = False
         else:
             M.kick_drift(bd.x, bd.v, bd.w, bd.q, Lr, bd.f, bd.tq, bd.mass, bd.inert, bd.flags, dt, alpha,
-                         rotate_body, clumps, planar, adaptive, nl.xref, lim2, rebuild, eabs)
+                         rotate_body, clumps, static, nl.xref, lim2, rebuild, eabs)
             counters[C_KICK] += 1
         place(g, bd, flags, nl.xref, lim2, rebuild)
         if clumps:

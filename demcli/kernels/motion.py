@@ -28,8 +28,9 @@ from numba import prange
 
 from demcli.jit import njit
 from demcli.kernels import quat
-from demcli.kernels.layout import FIX_ROTATION, FIX_TRANSLATION, FIX_X, FIX_XYZ, LOADED
-from demcli.kernels.switch import choose
+from demcli.kernels.layout import (F_ADAPTIVE, F_ENERGY, F_PLANAR, F_VISCOUS, FIX_ROTATION, FIX_TRANSLATION, FIX_X,
+                                   FIX_XYZ, LOADED)
+from demcli.kernels.switch import choose, on
 from demcli.kernels.walls import (FORCE, PRESSURE, SERVO, W_AMPLITUDE, W_AREA, W_FREQ, W_GAIN, W_MASS,
                                   W_PHASE, W_RATE, W_START, W_TARGET, W_VMAX, applied_force)
 
@@ -173,15 +174,17 @@ def damping_factors(alpha, h):
 
 
 @njit(parallel=True)
-def kick_drift(x, v, w, q, L, f, tq, mass, inert, bflags, dt, alpha, rotate_body, members, planar,
-               adaptive, xref, lim2, rebuild, eabs):
+def kick_drift(x, v, w, q, L, f, tq, mass, inert, bflags, dt, alpha, rotate_body, members, static, xref, lim2,
+               rebuild, eabs):
     """First half kick, rotation (rigid rotors) and drift of every body; sets rebuild[0] when a
     body that is its own collision primitive moved > skin/2 (clump members are checked when
     placed); eabs[b]: the adaptive damping's absorbed energy of this half kick. L: None for spin
-    rotors (:func:`rotors`)."""
+    rotors (:func:`rotors`); static: the literal mask of the static switches (planar, adaptive)."""
     h = 0.5 * dt
     c1p, c2p = damping_factors(alpha, h)
     for b in prange(x.shape[0]):
+        planar = on(static, F_PLANAR)  # constants inside the loop (static: the literal mask)
+        adaptive = on(static, F_ADAPTIVE)
         fl = bflags[b]
         c1 = c1p
         c2 = c2p
@@ -263,11 +266,16 @@ def finish_body(b, fx, fy, fz, tx, ty, tz, v, w, L, q, inert, mass, bflags, f, t
 
     The arrays are the Bodies' (load: the actor table); gravity (3,) and damping (local lambda,
     viscous alpha) the Params'; L: None for spin rotors (:func:`rotors`); sw: switches (gravity,
-    local, viscous, energy, rotate, planar, adaptive); dt: the contact step (0 when priming); h: the half kick; cc: the adaptive
+    local, rotate, and the literal mask of the static ones: viscous, energy, planar, adaptive,
+    :mod:`demcli.kernels.switch`); dt: the contact step (0 when priming); h: the half kick; cc: the adaptive
     damping factors (c1, c2); tload: the time of the positions [s] for actor loads. (At most 30
     arguments: CPython passes more as *args, which numba cannot inline.)
     """
-    use_gravity, use_local, use_visc, energy, rotate_body, planar, adaptive = sw
+    use_gravity, use_local, rotate_body, static = sw
+    use_visc = on(static, F_VISCOUS)
+    energy = on(static, F_ENERGY)
+    planar = on(static, F_PLANAR)
+    adaptive = on(static, F_ADAPTIVE)
     rigid = L is not None
     local, visc = damping
     c1p, c2p = cc
