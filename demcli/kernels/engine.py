@@ -136,7 +136,7 @@ def gather(bd, L, fs, ts, own, nl, par, flags, sw, gs, dt, frow, trow, erow, esp
     x, v, w, q, _, f, tq, mass, inert, bflags, load = bd
     gravity, damping = par.gravity, (par.local, par.visc)
     for i in prange(frow.shape[0]):
-        energy = on(static, F_ENERGY)  # constants inside the loop (static: the literal mask)
+        energy = on(static, F_ENERGY)  # constants when static is the literal 0
         planar = on(static, F_PLANAR)
         fx = frow[i, 0]
         fy = frow[i, 1]

@@ -179,11 +179,12 @@ def kick_drift(x, v, w, q, L, f, tq, mass, inert, bflags, dt, alpha, rotate_body
     """First half kick, rotation (rigid rotors) and drift of every body; sets rebuild[0] when a
     body that is its own collision primitive moved > skin/2 (clump members are checked when
     placed); eabs[b]: the adaptive damping's absorbed energy of this half kick. L: None for spin
-    rotors (:func:`rotors`); static: the literal mask of the static switches (planar, adaptive)."""
+    rotors (:func:`rotors`); static: the mask of the static switches (planar, adaptive), the
+    literal 0 when none is on."""
     h = 0.5 * dt
     c1p, c2p = damping_factors(alpha, h)
     for b in prange(x.shape[0]):
-        planar = on(static, F_PLANAR)  # constants inside the loop (static: the literal mask)
+        planar = on(static, F_PLANAR)  # constants when static is the literal 0
         adaptive = on(static, F_ADAPTIVE)
         fl = bflags[b]
         c1 = c1p
@@ -266,8 +267,8 @@ def finish_body(b, fx, fy, fz, tx, ty, tz, v, w, L, q, inert, mass, bflags, f, t
 
     The arrays are the Bodies' (load: the actor table); gravity (3,) and damping (local lambda,
     viscous alpha) the Params'; L: None for spin rotors (:func:`rotors`); sw: switches (gravity,
-    local, rotate, and the literal mask of the static ones: viscous, energy, planar, adaptive,
-    :mod:`demcli.kernels.switch`); dt: the contact step (0 when priming); h: the half kick; cc: the adaptive
+    local, rotate, and the mask of the static ones, the literal 0 when none is on: viscous,
+    energy, planar, adaptive, :mod:`demcli.kernels.switch`); dt: the contact step (0 when priming); h: the half kick; cc: the adaptive
     damping factors (c1, c2); tload: the time of the positions [s] for actor loads. (At most 30
     arguments: CPython passes more as *args, which numba cannot inline.)
     """
