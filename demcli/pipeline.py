@@ -210,8 +210,11 @@ class Runner:
 
     def config_hash(self, cfg):
         from demcli.config.schema import sha256_of
+        from demcli.stages.base import STAGE_TYPES
 
-        return sha256_of({"stage": cfg.to_dict(), "case": self._shared})
+        st = STAGE_TYPES[cfg.type]
+        files = st.file_digest(cfg, self.case_path.resolve().parent) if st.file_digest is not None else None
+        return sha256_of({"stage": cfg.to_dict(), "case": self._shared, **({"files": files} if files else {})})
 
     def finish_state(self, state):
         """Materials of the case into a state about to be written."""
@@ -306,7 +309,7 @@ class Runner:
                     state_in = None
                     continue
                 moved = False
-                if st_type.needs_input:  # (validation refuses a first stage that needs an input)
+                if st_type.reads_input(cfg):  # (validation refuses a first stage that needs an input)
                     if in_path is None or not in_path.exists():
                         raise InputError(f"stage {cfg.name}: missing stage input {in_path}; run the earlier "
                                          "stages first (without --from/--only)")

@@ -20,8 +20,8 @@ from dataclasses import dataclass
 from functools import lru_cache, partial
 
 from demcli.config.load import load_case as _load_case
-from demcli.config.schema import (NOVALUE, Float, Int, List, Map, Node, Section, Str, Tagged, did_you_mean,
-                                  split_subpath, validate_quietly)
+from demcli.config.schema import (NOVALUE, Float, Int, List, Map, Node, Optional, Section, Str, Tagged,
+                                  did_you_mean, split_subpath, validate_quietly)
 
 MATERIAL = Section({
     "density": Float("kg/m^3", min=0, min_inclusive=False, doc="particle density"),
@@ -31,6 +31,9 @@ MATERIAL = Section({
     "rolling_friction": Float(min=0, default=0.0, doc="rolling friction coefficient"),
     "restitution": Float(min=0, max=1, min_inclusive=False, default=0.5,
                          doc="normal coefficient of restitution"),
+    "shear": Optional(Float("Pa", min=0, min_inclusive=False),
+                      doc="shear modulus G of Hertz-Mindlin's tangential stiffness 8 G* sqrt(R* delta) and of "
+                          "the Rayleigh time step (default E / (2 (1 + nu)))"),
 }, doc="a material, referenced by name from stages and walls")
 
 NAME = r"^[A-Za-z][A-Za-z0-9_\-]*$"
@@ -99,7 +102,7 @@ def _stage_inputs(stages, report, catalog):
     """Each raw stage's input must hold what its type requires: the first stage takes none."""
     for k, (cfg, scene) in enumerate(zip(stages, catalog.input_scenes(stages))):
         st = catalog.type_of(cfg)
-        if st is None or not st.needs_input:
+        if st is None or not st.reads_input(cfg):
             continue
         if k == 0:
             starts = ", ".join(n for n, t in sorted(catalog.types.items()) if not t.needs_input)

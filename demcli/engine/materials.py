@@ -3,7 +3,9 @@
 Mixing rules (the defaults; a case can override any pair):
 
 * effective moduli (Hertz): 1/E* = (1-nu1^2)/E1 + (1-nu2^2)/E2,
-  1/G* = 2(2-nu1)(1+nu1)/E1 + 2(2-nu2)(1+nu2)/E2 (Johnson 1985, ch. 4 and 7);
+  1/G* = (2-nu1)/G1 + (2-nu2)/G2 (Johnson 1985, ch. 4 and 7), with G = E / (2(1+nu)) unless a
+  material gives its shear modulus; a rigid material (a wall with ``rigid: true``, its twin
+  from :func:`with_rigid_twins`) adds no compliance: E* = E1/(1-nu1^2), G* = G1/(2-nu1);
 * friction, rolling friction and restitution: geometric mean of the two materials;
 * damping ratio from restitution: zeta = -ln e / sqrt(pi^2 + ln^2 e).
 """
@@ -13,8 +15,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from demcli.kernels.contact import (HERTZ, LINEAR, N_PARAMS, P_CN, P_CTR, P_ESTAR, P_GSTAR, P_KN,
-                                    P_KT, P_MU, P_MUR, P_ZETA)
+from demcli.kernels.contact import (HERTZ, LINEAR, N_PARAMS, P_ARM, P_CN, P_CTR, P_ESTAR, P_GSTAR, P_KN,
+                                    P_KT, P_MU, P_MUR, P_NOTENSION, P_ZETA)
 
 LAWS = {"linear": LINEAR, "hertz_mindlin": HERTZ}
 
@@ -30,6 +32,20 @@ class Material:
     friction: float = 0.5   # -
     rolling_friction: float = 0.0  # -
     restitution: float = 0.5       # -
+    shear: float = None            # Pa; None: E / (2 (1 + nu))
+    rigid: bool = False            # no compliance in E*, G* (rigid walls)
+
+    def compliances(self):
+        """((1 - nu^2)/E, (2 - nu)/G) [1/Pa], the material's terms of 1/E* and 1/G*; 0 when rigid."""
+        if self.rigid:
+            return 0.0, 0.0
+        if self.shear is None:
+            return (1 - self.poisson ** 2) / self.young, 2 * (2 - self.poisson) * (1 + self.poisson) / self.young
+        return (1 - self.poisson ** 2) / self.young, (2 - self.poisson) / self.shear
+
+    def shear_modulus(self):
+        """G [Pa]: the given one, or E / (2 (1 + nu))."""
+        return self.young / (2 * (1 + self.poisson)) if self.shear is None else self.shear
 
 
 @dataclass(frozen=True)
@@ -41,6 +57,8 @@ class ContactModel:
     kt: float = 0.0                      # linear tangential stiffness [N/m]
     cn: float = 0.0                      # absolute normal damping [N s/m]; when > 0 restitution is not used
     tangential_damping: float = 0.0      # c_t / c_n ratio
+    no_tension: bool = False             # clip the normal force at 0 (kernels/contact.py)
+    lever_arm: str = "deformed"          # 'deformed' (R - delta/2) or 'radius' (R)
     pairs: tuple = field(default_factory=tuple)  # ((mat_a, mat_b, {key: value}), ...)
 
 
@@ -50,6 +68,32 @@ def damping_ratio(e):
         return 0.0
     le = math.log(e)
     return -le / math.sqrt(math.pi ** 2 + le * le)
+
+
+RIGID_SUFFIX = " (rigid)"
+
+
+def with_rigid_twins(materials):
+    """The materials followed by a rigid twin of each (same friction, restitution, name + " (rigid)"):
+    a wall with ``rigid: true`` of material k uses material n + k."""
+    import dataclasses
+
+    return list(materials) + [dataclasses.replace(m, name=m.name + RIGID_SUFFIX, rigid=True) for m in materials]
+
+
+def wall_materials(materials, material, rigid):
+    """(n_w,) int64 material index of each wall for the contact tables: ``material`` (indices
+    into ``materials``), a rigid wall's moved to its material's rigid twin (:func:`with_rigid_twins`).
+    ``rigid``: (n_w,) bool or None (none rigid)."""
+    out = np.array(material, dtype=np.int64)
+    if rigid is not None:
+        names = [m.name for m in materials]
+        for k in np.flatnonzero(rigid):
+            twin = materials[out[k]].name + RIGID_SUFFIX
+            if twin not in names:
+                raise ValueError(f"wall {k} is rigid but the materials have no {twin!r} (materials.with_rigid_twins)")
+            out[k] = names.index(twin)
+    return out
 
 
 def pair_table(materials, model):
@@ -71,9 +115,11 @@ def pair_table(materials, model):
             row[P_MU] = mu
             row[P_MUR] = mur
             row[P_CTR] = model.tangential_damping
-            row[P_ESTAR] = 1.0 / ((1 - mi.poisson ** 2) / mi.young + (1 - mj.poisson ** 2) / mj.young)
-            row[P_GSTAR] = 1.0 / (2 * (2 - mi.poisson) * (1 + mi.poisson) / mi.young
-                                  + 2 * (2 - mj.poisson) * (1 + mj.poisson) / mj.young)
+            row[P_NOTENSION] = 1.0 if model.no_tension else 0.0
+            row[P_ARM] = 1.0 if model.lever_arm == "deformed" else 0.0
+            (ei, gi), (ej, gj) = mi.compliances(), mj.compliances()
+            row[P_ESTAR] = 1.0 / (ei + ej) if ei + ej > 0.0 else math.inf  # two rigid materials
+            row[P_GSTAR] = 1.0 / (gi + gj) if gi + gj > 0.0 else math.inf
             if model.law == "linear":
                 row[P_KN] = o.get("kn", model.kn)
                 row[P_KT] = o.get("kt", model.kt)
@@ -106,6 +152,6 @@ def critical_time_step(model, prm, materials, body_mass, sphere_radius, sphere_b
     for k in np.unique(sphere_material):
         mat = materials[k]
         r = sphere_radius[sphere_material == k].min()
-        shear = mat.young / (2 * (1 + mat.poisson))
+        shear = mat.shear_modulus()
         best = min(best, math.pi * r * math.sqrt(mat.density / shear) / (0.1631 * mat.poisson + 0.8766))
     return best

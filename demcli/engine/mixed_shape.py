@@ -179,7 +179,7 @@ class MixedShape:
         friction, rolling = s.flags[K.F_FRICTION], s.flags[K.F_ROLLING]
         e = strain_energy_mixed(MixedShape.geometry(s), nl, s.prm, s.law, friction, rolling)
         return float(e + wall_strain_energy(s.xs[:s.ns], s.rad, s.smat, s.prm, s.law, nl.wstart, nl.wwall, w.kind,
-                                            s.wpoint, w.normal, w.radius, w.material, nl.wft, nl.wmr, friction,
+                                            s.wpoint, w.normal, w.radius, s.wmat, nl.wft, nl.wmr, friction,
                                             rolling))
 
     contact_count = staticmethod(SphereShape.contact_count)  # (pairs touching, wall contacts touching)

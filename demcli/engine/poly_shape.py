@@ -74,7 +74,7 @@ def rotational_compliance(vertices, vertex_start, shape, inertia):
 
 
 def poly_pair_table(materials, model):
-    """(n_m, n_m, N_QPARAMS) table: k_n = 4 E / (3 sqrt(pi)) with E = 2 E1 E2 / (E1 + E2),
+    """(n_m, n_m, N_QPARAMS) table: k_n = 4 E / (3 sqrt(pi)) with E = 2 E1 E2 / (E1 + E2) (2 E1 on a rigid wall),
     friction (geometric mean) and the dashpot damping ratio from restitution (geometric
     mean), with the per-pair overrides of ``model.pairs`` (friction, restitution)."""
     from demcli.kernels.shapes.polyhedra import N_QPARAMS, Q_KN, Q_MU, Q_ZETA
@@ -92,7 +92,10 @@ def poly_pair_table(materials, model):
     for i, mi in enumerate(materials):
         for j, mj in enumerate(materials):
             o = overrides.get((i, j), {})
-            e = 2.0 * mi.young * mj.young / (mi.young + mj.young)
+            if mi.rigid or mj.rigid:  # a rigid wall: 1/E = 1/(2 E1)
+                e = math.inf if mi.rigid and mj.rigid else 2.0 * (mj.young if mi.rigid else mi.young)
+            else:
+                e = 2.0 * mi.young * mj.young / (mi.young + mj.young)
             prm[i, j, Q_KN] = 4.0 * e / (3.0 * math.sqrt(math.pi))
             prm[i, j, Q_MU] = o.get("friction", math.sqrt(mi.friction * mj.friction))
             prm[i, j, Q_ZETA] = damping_ratio(o.get("restitution", math.sqrt(mi.restitution * mj.restitution)))
@@ -299,7 +302,7 @@ class PolyShape:
         amax = np.array([fa[fs[k]:fs[k + 1]].max() for k in range(len(fs) - 1)])[s.shape]
         kn = s.prm[..., Q_KN]
         # stiffest partner material of each body (walls included)
-        mats = np.unique(np.concatenate([s.bmat, np.asarray(s.walls.material, np.int64)]))
+        mats = np.unique(np.concatenate([s.bmat, s.wmat]))
         knb = kn[s.bmat][:, mats].max(axis=1)
         crot = rotational_compliance(s.shapes[1], s.shapes[0], s.shape, s.inert)
         crot[(s.bflags & K.FIX_ROTATION) != 0] = 0.0

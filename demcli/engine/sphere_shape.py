@@ -180,7 +180,7 @@ class SphereShape:
                                       s.prm, s.law, friction, rolling)) if len(bd) else 0.0
         return eb + float(total_strain_energy(nl.pi, nl.pj, s.xs, s.rad, s.smat, s.prm, s.law, nl.ft, nl.mr,
                                               friction, rolling, nl.wstart, nl.wwall, w.kind, s.wpoint, w.normal,
-                                              w.radius, w.material, nl.wft, nl.wmr))
+                                              w.radius, s.wmat, nl.wft, nl.wmr))
 
     @staticmethod
     def contact_count(s):

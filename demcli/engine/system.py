@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from demcli.engine.materials import wall_materials
 from demcli.kernels import layout as K
 from demcli.kernels import motion as M
 from demcli.kernels.switch import static_mask
@@ -37,6 +38,7 @@ class Walls:
     control: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int8))
     prm: np.ndarray = field(default_factory=lambda: np.zeros((0, N_WPARAMS)))
     extent: np.ndarray = field(default_factory=lambda: np.zeros((0, 6)))
+    rigid: np.ndarray = None  # (n_w,) bool: E* and G* from the particle alone; None: none rigid
 
     def __len__(self):
         return len(self.kind)
@@ -229,6 +231,7 @@ class System:
         walls.normal = np.ascontiguousarray(walls.normal, np.float64)
         walls.radius = np.ascontiguousarray(walls.radius, np.float64)
         walls.material = np.ascontiguousarray(walls.material, np.int64)
+        self.wmat = wall_materials(self.materials, walls.material, walls.rigid)
         walls.control = np.ascontiguousarray(walls.control, np.int8)
         walls.prm = np.ascontiguousarray(walls.prm, np.float64)
         self.wforce = np.zeros((len(walls), 3))
@@ -288,7 +291,7 @@ class System:
     def kernel_walls(self):
         """The WallArrays tuple (updated in place)."""
         w = self.walls
-        return K.WallArrays(w.kind, self.wpoint, w.normal, w.radius, self.wv, w.material, w.control, w.prm,
+        return K.WallArrays(w.kind, self.wpoint, w.normal, w.radius, self.wv, self.wmat, w.control, w.prm,
                             self.wforce, self.wkn)
 
     def advance(self, nsteps):

@@ -50,7 +50,7 @@ import numpy as np
 from numba import prange
 
 from demcli.jit import njit
-from demcli.kernels.contact import _to_tangent_plane, contact_law, pair_kinematics, strain_energy
+from demcli.kernels.contact import P_ARM, _to_tangent_plane, contact_law, pair_kinematics, strain_energy
 
 CONTACT_BOND = 0
 PARALLEL_BOND = 1
@@ -400,8 +400,9 @@ def bond_pass(bstart, bj, bmodel, bstate, hist, bprm, xs, vs, ws, rad, smat, sma
             ny = dy / d
             nz = dz / d
             delta = ri + rj - d
-            ai = ri - 0.5 * delta
-            aj = rj - 0.5 * delta
+            arm = 0.5 * delta * prm[smat[i], smat[j], P_ARM]  # contact.lever_arm, as the pair pass
+            ai = ri - arm
+            aj = rj - arm
             vx, vy, vz, wx, wy, wz = pair_kinematics(vs, ws, i, j, nx, ny, nz, ai, aj)
             ed = ef = 0.0
             took_over = False  # the bond broke this step and its seated contact acts at once

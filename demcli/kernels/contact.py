@@ -15,14 +15,33 @@ Laws (``law`` argument):
   S_n = 2 E* sqrt(R* delta), k_t = S_t = 8 G* sqrt(R* delta),
   beta = -ln e / sqrt(pi^2 + ln^2 e).
 
+Normal force: by default the dashpot may pull at the end of a contact (F_n < 0 while the
+spheres separate faster than the spring pushes), so that an isolated impact ends at delta = 0
+with exactly the restitution e. ``P_NOTENSION`` = 1 (the stage's ``contact.no_tension``)
+clips F_n at 0 instead: no attraction, and a rebound a little above e.
+
 Tangential (when friction is active): incremental spring dF_t = -k_t v_t dt with the
 history rotated into the current tangent plane (magnitude kept), optional dashpot
-c_t = ratio * c_n, Coulomb limit |F_t| <= mu max(F_n, 0) (the stored spring is scaled
-back to the limit).
+c_t = ratio * c_n, Coulomb limit |F_t| <= mu F_c (the stored spring is scaled back to the
+limit). F_c is the part of the normal force whose impulse is the contact's normal impulse,
+so that a contact that slides throughout gets a tangential impulse of exactly mu times its
+normal impulse (the rigid-body limit mu (1 + e) m v_n of an oblique impact, Maw, Barber &
+Fawcett 1976): with tension allowed the elastic force k_n delta (the dashpot's impulse
+int c_n(delta) v_n dt = -int c_n(delta) d delta vanishes over a contact that starts and ends
+at delta = 0, for any c_n(delta): linear and Hertz alike); with no tension the clipped F_n
+itself. (Capping with max(F_n, 0) would count the compressive part of the dashpot but not
+its tensile end: an e = 0.5 impact in gross sliding then leaves 2-3 % faster than the limit.)
 
 Rolling resistance (when active): elastic-plastic spring (Ai, Chen, Rotter & Ooi 2011,
 model C without the viscous term): dM_r = -k_r omega_rel,t dt, k_r = 2.25 k_n mu_r^2 R*^2,
-|M_r| <= mu_r R* max(F_n, 0).
+|M_r| <= mu_r R* F_c.
+
+Lever arm: the contact point lies a_i = R_i - P_ARM delta / 2 from sphere i's centre (and
+R - P_ARM delta from a sphere's centre for a wall contact): P_ARM = 1 (``contact.lever_arm:
+deformed``, the default) puts it in the middle of the overlap, where the deformed spheres
+touch; P_ARM = 0 (``radius``) uses the undeformed radius, as the rigid-body formulas of an
+oblique impact do (soft contacts: the spin after an impact differs by about the mean
+delta / R between the two).
 
 Sign convention: n points from j to i, ``v`` is the velocity of i's contact point
 relative to j's, the returned force and moment act on i (minus on j).
@@ -45,7 +64,9 @@ P_MUR = 5     # rolling friction coefficient [-]
 P_ESTAR = 6   # effective Young's modulus E* [Pa]
 P_GSTAR = 7   # effective shear modulus G* [Pa]
 P_CTR = 8     # tangential / normal damping ratio [-]
-N_PARAMS = 9
+P_NOTENSION = 9  # 1: the normal force is clipped at 0 (no attraction); 0: the dashpot may pull [-]
+P_ARM = 10    # fraction of the overlap the lever arm loses: 1 deformed (R - delta/2), 0 radius [-]
+N_PARAMS = 11
 
 _SQRT_5_6 = math.sqrt(5.0 / 6.0)
 
@@ -123,13 +144,19 @@ def contact_law(law, prm, ma, mb, delta, nx, ny, nz, vx, vy, vz, wx, wy, wz, rst
         cn = prm[ma, mb, P_CN] + 2.0 * prm[ma, mb, P_ZETA] * math.sqrt(mstar * kn)
         kt = prm[ma, mb, P_KT]
         ct = prm[ma, mb, P_CTR] * cn
-    fn = kn * delta - cn * vn
+    fel = kn * delta
+    fn = fel - cn * vn
     e_damp = cn * vn * vn * dt
+    fcap = fel  # the Coulomb and rolling limits' normal force (module docstring)
+    if prm[ma, mb, P_NOTENSION] != 0.0:
+        if fn < 0.0:
+            fn = 0.0
+            e_damp = fel * vn * dt  # the clipped dashpot absorbs the spring's work (vn > 0)
+        fcap = fn
     e_fric = 0.0
     fx = fn * nx
     fy = fn * ny
     fz = fn * nz
-    fpos = fn if fn > 0.0 else 0.0
     if friction:
         vtx = vx - vn * nx
         vty = vy - vn * ny
@@ -141,7 +168,7 @@ def contact_law(law, prm, ma, mb, delta, nx, ny, nz, vx, vy, vz, wx, wy, wz, rst
         tx = hx - ct * vtx
         ty = hy - ct * vty
         tz = hz - ct * vtz
-        lim = prm[ma, mb, P_MU] * fpos
+        lim = prm[ma, mb, P_MU] * fcap
         tmag2 = tx * tx + ty * ty + tz * tz
         if tmag2 > lim * lim:
             tmag = math.sqrt(tmag2)
@@ -175,7 +202,7 @@ def contact_law(law, prm, ma, mb, delta, nx, ny, nz, vx, vy, vz, wx, wy, wz, rst
         ax -= kr * wtx * dt
         ay -= kr * wty * dt
         az -= kr * wtz * dt
-        lim = mur * rstar * fpos
+        lim = mur * rstar * fcap
         amag2 = ax * ax + ay * ay + az * az
         if amag2 > lim * lim:
             amag = math.sqrt(amag2)

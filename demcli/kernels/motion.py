@@ -268,8 +268,8 @@ def finish_body(b, fx, fy, fz, tx, ty, tz, v, w, L, q, inert, mass, bflags, f, t
     The arrays are the Bodies' (load: the actor table); gravity (3,) and damping (local lambda,
     viscous alpha) the Params'; L: None for spin rotors (:func:`rotors`); sw: switches (gravity,
     local, rotate, and the mask of the static ones, the literal 0 when none is on: viscous,
-    energy, planar, adaptive, :mod:`demcli.kernels.switch`); dt: the contact step (0 when priming); h: the half kick; cc: the adaptive
-    damping factors (c1, c2); tload: the time of the positions [s] for actor loads. (At most 30
+    energy, planar, adaptive, :mod:`demcli.kernels.switch`); dt: the contact step (0 when
+    priming); h: the half kick; cc: the adaptive damping factors (c1, c2); tload: the time of the positions [s] for actor loads. (At most 30
     arguments: CPython passes more as *args, which numba cannot inline.)
     """
     use_gravity, use_local, rotate_body, static = sw

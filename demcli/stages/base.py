@@ -43,6 +43,10 @@ class StageType:
         provides: state fields the stage writes, ``group/name`` or ``group/*`` (every field
             of the group).
         keeps: groups of the input state that the output carries on when the input has them.
+        adds: the name of a bool key with which a stage that starts a scene (needs_input False)
+            adds to the input's scene instead (it then reads the input and keeps all of it).
+        file_digest: optional ``file_digest(cfg, case_dir) -> str or None``: a digest of the files
+            the config names, part of the stage's config hash (an edited file runs it again).
         config_requires: optional ``config_requires(cfg) -> {key: fields}``: further input
             fields that this config reads (beyond ``requires``) by the config key that reads
             them, checked at validation.
@@ -66,6 +70,15 @@ class StageType:
     keeps: tuple = ()
     config_requires: object = None
     case_check: object = None
+    adds: str = None
+    file_digest: object = None
+
+    def reads_input(self, cfg):
+        """Whether a stage of this type with config ``cfg`` (a validated Node or a raw mapping)
+        reads the state of the stage before: ``needs_input``, or its ``adds`` key set true."""
+        if self.adds is None or not isinstance(cfg, Mapping):
+            return self.needs_input
+        return cfg.get(self.adds, False) is True
 
 
 def register_stage(stage_type):
@@ -83,10 +96,10 @@ def load_stage_types():
     from demcli.stages.asphalt import discretize, polygons  # 2D sections, seed 001
     from demcli.stages.asphalt import sand  # bonded viscoelastic specimens, seed 003
     from demcli.stages.ballast import assemble, box, clumps, library  # railway ballast, seed 002
-    from demcli.stages.specimen import generate, gradation
+    from demcli.stages.specimen import generate, gradation, particles
 
     del dem, carve, compact, cut, mastic, place, discretize, polygons, sand  # imported for their registrations
-    del assemble, box, clumps, library, generate, gradation
+    del assemble, box, clumps, library, generate, gradation, particles
     return STAGE_TYPES
 
 
@@ -161,10 +174,13 @@ def input_scenes(stages):
     for cfg in stages:
         out.append(scene)
         st = type_of(cfg)
-        if st is None or (st.needs_input and st.keeps and scene is None):
+        reads = st is not None and st.reads_input(cfg)
+        if st is None or (reads and (st.keeps or st.adds) and scene is None):
             scene = None
+        elif reads and st.adds:  # adds to the scene: keeps all of it
+            scene = frozenset(st.provides) | scene
         else:
-            kept = {f for f in scene if _group(f) in st.keeps} if st.needs_input and scene else set()
+            kept = {f for f in scene if _group(f) in st.keeps} if reads and scene else set()
             scene = frozenset(st.provides) | kept
     return out
 
@@ -180,7 +196,7 @@ def earlier_stage(case, k, type_name):
     for cfg in reversed(case.stages[:k]):
         if cfg.type == type_name:
             return cfg
-        if not STAGE_TYPES[cfg.type].needs_input:
+        if not STAGE_TYPES[cfg.type].reads_input(cfg):
             return None
     return None
 

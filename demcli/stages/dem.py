@@ -54,10 +54,15 @@ def _check_box(node, report):
             report(f"max.{d}", f"must be > min ({node.min[d]:g} m)", node.max[d])
 
 
+_RIGID = Bool(default=False, doc="E* and G* from the particle alone (an infinitely stiff wall, as in rigid-body "
+                                 "impact tests); the wall's material still gives friction and restitution; "
+                                 "linear law: no effect (k_n, k_t are per pair)")
+
 WALL = Tagged("type", {
     "plane": Section({
         "name": Str(default=None), "point": Vector(3, "m"), "normal": Vector(3, doc="into the domain"),
         "material": Str(), "motion": MOTION,
+        "rigid": _RIGID,
         "extent": Optional(Vector(6, "m"), doc="drawing bounds xmin ymin zmin xmax ymax zmax"),
         "lay_on_particles": Optional(Float("m", min=0),
                                      doc="at the stage start move the wall along its normal to this gap from the "
@@ -66,12 +71,14 @@ WALL = Tagged("type", {
     "box": Section({
         "name": Str(default="box"), "min": Vector(3, "m"), "max": Vector(3, "m"), "material": Str(),
         "open": List(Str(choices=list(FACES)), default=(), doc="faces left out, e.g. [z1]"),
+        "rigid": _RIGID,
         "motion": Map(MOTION, default={}, doc="motion per face name (x0 ... z1); others fixed"),
     }, check=_check_box),
     "cylinder": Section({
         "name": Str(default=None), "base": Vector(3, "m", doc="point on the axis (bottom)"),
         "axis": Vector(3, default=(0.0, 0.0, 1.0)), "radius": Float("m", min=0, min_inclusive=False),
         "height": Float("m", min=0, min_inclusive=False, doc="drawn height"), "material": Str(),
+        "rigid": _RIGID,
         "motion": MOTION,
     }),
 })
@@ -132,6 +139,13 @@ FIELDS = {
         "kt": Optional(Float("N/m", min=0), doc="linear: tangential stiffness (default kn/4)"),
         "cn": Float("N*s/m", min=0, default=0.0, doc="linear: absolute normal damping (0: from restitution)"),
         "tangential_damping": Float(min=0, default=0.0, doc="c_t / c_n"),
+        "no_tension": Bool(default=False, doc="clip the normal force at 0: the dashpot does not pull at the end of "
+                                              "a contact (the restitution then comes out a little above e); "
+                                              "friction is capped by mu times the clipped force"),
+        "lever_arm": Str(choices=["deformed", "radius"], default="deformed",
+                         doc="contact point of a sphere contact: deformed, in the middle of the overlap (R - "
+                             "delta/2; R - delta on a wall); radius, at R from the centre as in rigid-body "
+                             "impact theory"),
         "pairs": List(CONTACT_PAIR, default=(), doc="per material pair overrides"),
     }, default={}),
     "walls": List(WALL, default=(), doc="rigid walls"),
@@ -305,19 +319,22 @@ def contact_model(cfg):
                     if p[k] is not None}) for p in c.pairs)
     kn = (c.kn or 0.0) * s
     kt = c.kt * s if c.kt is not None else kn / 4.0
-    return ContactModel(law=c.law, kn=kn, kt=kt, cn=c.cn, tangential_damping=c.tangential_damping, pairs=pairs)
+    return ContactModel(law=c.law, kn=kn, kt=kt, cn=c.cn, tangential_damping=c.tangential_damping,
+                        no_tension=c.no_tension, lever_arm=c.lever_arm, pairs=pairs)
 
 
 def case_materials(case, stiffness=1.0):
-    """Materials of the case; ``stiffness`` scales every Young's modulus (scaling.stiffness)."""
-    from demcli.engine.materials import Material
+    """Materials of the case and their rigid twins (:func:`demcli.engine.materials.with_rigid_twins`:
+    rigid walls use them); ``stiffness`` scales every Young's and shear modulus (scaling.stiffness)."""
+    from demcli.engine.materials import Material, with_rigid_twins
 
     mats = [Material(name, **dict(m.to_dict())) for name, m in case.materials.items()]
     if stiffness != 1.0:
         import dataclasses
 
-        mats = [dataclasses.replace(m, young=m.young * stiffness) for m in mats]
-    return mats
+        mats = [dataclasses.replace(m, young=m.young * stiffness,
+                                    shear=None if m.shear is None else m.shear * stiffness) for m in mats]
+    return with_rigid_twins(mats)
 
 
 def phase_materials(ctx, groups):
@@ -457,7 +474,10 @@ def build_walls(cfg, case):
     names = list(case.materials)
     rows = []
 
-    def add(name, kind, point, normal, radius, material, motion, extent, area):
+    def rigid(w):  # (the walls some stages build in code leave it out)
+        return bool(w.get("rigid", False))
+
+    def add(name, kind, point, normal, radius, material, motion, extent, area, rigid):
         prm = np.zeros(W.N_WPARAMS)
         control = W.FIXED
         v = np.zeros(3)
@@ -488,19 +508,19 @@ def build_walls(cfg, case):
                 prm[W.W_TARGET] += motion.mass * float(g @ (np.asarray(normal, float) / np.linalg.norm(normal)))
         n = np.asarray(normal, float)
         rows.append((name, kind, np.asarray(point, float), n / np.linalg.norm(n), radius, names.index(material),
-                     control, prm, v, np.asarray(extent, float)))
+                     control, prm, v, np.asarray(extent, float), rigid))
 
     for k, w in enumerate(cfg.walls):
         if w.type == "plane":
             ext = w.extent if w.extent is not None else tuple(np.r_[np.array(w.point) - 0.1, np.array(w.point) + 0.1])
-            add(w.name or f"wall{k}", W.PLANE, w.point, w.normal, 0.0, w.material, w.motion, ext, math.nan)
+            add(w.name or f"wall{k}", W.PLANE, w.point, w.normal, 0.0, w.material, w.motion, ext, math.nan, rigid(w))
         elif w.type == "cylinder":
             b = np.array(w.base)
             ext = np.r_[b - w.radius, b + w.radius]
             ext[5] = b[2] + w.height
             ext[2] = b[2]
             add(w.name or f"wall{k}", W.CYLINDER, w.base, w.axis, w.radius, w.material, w.motion, ext,
-                2.0 * math.pi * w.radius * w.height)
+                2.0 * math.pi * w.radius * w.height, rigid(w))
         else:
             lo, hi = np.array(w.min), np.array(w.max)
             ext = np.r_[lo, hi]
@@ -513,14 +533,16 @@ def build_walls(cfg, case):
                 normal[d] = 1.0 if f % 2 == 0 else -1.0
                 point = lo.copy() if f % 2 == 0 else hi.copy()
                 area = float(np.prod(np.delete(size, d)))
-                add(f"{w.name}.{face}", W.PLANE, point, normal, 0.0, w.material, w.motion.get(face), ext, area)
+                add(f"{w.name}.{face}", W.PLANE, point, normal, 0.0, w.material, w.motion.get(face), ext, area,
+                rigid(w))
     walls = Walls()
     if rows:
         walls = Walls(name=[r[0] for r in rows], kind=np.array([r[1] for r in rows], np.int8),
                       point=np.array([r[2] for r in rows]), normal=np.array([r[3] for r in rows]),
                       radius=np.array([r[4] for r in rows], float), material=np.array([r[5] for r in rows], np.int64),
                       control=np.array([r[6] for r in rows], np.int8), prm=np.array([r[7] for r in rows]),
-                      v=np.array([r[8] for r in rows]), extent=np.array([r[9] for r in rows]))
+                      v=np.array([r[8] for r in rows]), extent=np.array([r[9] for r in rows]),
+                      rigid=np.array([r[10] for r in rows], bool))
     return walls  # the modes each wall type takes are checked at validation (_check_wall_mode)
 
 

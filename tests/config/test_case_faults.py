@@ -232,7 +232,7 @@ def test_a_first_stage_that_needs_an_input_is_refused(tmp_path):
     pour, settle = stages.split("  - name: settle")
     result, path = _check(tmp_path, head + "stages:\n  - name: settle" + settle + pour)
     _refused(result, f"{path}:6: stages[0].type: stage type dem reads the state of an earlier stage, but this is the "
-                     "first stage; start with a stage that makes a scene (generate, gradation, prepare)")
+                     "first stage; start with a stage that makes a scene (generate, gradation, particles, prepare)")
 
 
 def test_what_a_config_reads_besides_its_type_must_be_written_before(tmp_path):

@@ -212,7 +212,7 @@ def test_oblique_impact_sliding_regime(build, law):
     # & Fawcett 1976; Chung & Ooi 2011, test 5), the tangential impulse is mu (1 + e) m v_n and
     #   v_t' = v_t - mu (1 + e) v_n,   omega' = 5 mu (1 + e) v_n / (2 r)
     # (spin about +y for motion along +x over a floor with normal +z: the forward rolling sense).
-    # Stiff contacts (delta_max / r = 0.3 % Hertz, 0.16 % linear): the engine's lever arm for a wall
+    # Stiff contacts (delta_max / r = 0.3 % Hertz, 0.16 % linear): the default lever arm for a wall
     # contact is the centre-to-wall distance r - delta, not r, so omega' falls short of the rigid
     # value by about the mean delta / r (1.5 % at delta_max / r = 1.8 %, measured with E = 1e8).
     mu, e, vn = 0.3, 1.0, 0.5

@@ -18,7 +18,7 @@ from numba import prange
 from demcli.jit import njit
 from demcli.kernels import quat
 from demcli.kernels.bonds import bond_forces
-from demcli.kernels.contact import (HERTZ, P_CN, P_ESTAR, P_KN, P_ZETA, contact_law, pair_kinematics,
+from demcli.kernels.contact import (HERTZ, P_ARM, P_CN, P_ESTAR, P_KN, P_ZETA, contact_law, pair_kinematics,
                                    strain_energy)
 from demcli.kernels.layout import F_BONDS, F_CLUMPS, F_ENERGY, F_FRICTION, F_ROLLING
 from demcli.kernels.switch import choose
@@ -109,13 +109,16 @@ def _pair_forces(start, pj, xs, vs, ws, rad, smat, smass, prm, law, dt, ft, mr, 
             ny = dy * inv
             nz = dz * inv
             delta = rs - d
-            ai = ri - 0.5 * delta
-            aj = rj - 0.5 * delta
+            ma = smat[i]
+            mb = smat[j]
+            arm = 0.5 * delta * prm[ma, mb, P_ARM]  # lever arms R - delta/2 or R (contact.lever_arm)
+            ai = ri - arm
+            aj = rj - arm
             vx, vy, vz, wx, wy, wz = pair_kinematics(vs, ws, i, j, nx, ny, nz, ai, aj)
             mi = smass[i]
             mj = smass[j]
             fx, fy, fz, mx, my, mz, ed, ef = contact_law(
-                law, prm, smat[i], smat[j], delta, nx, ny, nz, vx, vy, vz,
+                law, prm, ma, mb, delta, nx, ny, nz, vx, vy, vz,
                 wx, wy, wz, ri * rj / rs, mi * mj / (mi + mj), dt,
                 ft, mr, c, friction, rolling)
             fc[c, 0] = fx
@@ -171,13 +174,15 @@ def _wall_contact(i, k, w, xs, vs, ws, rad, smat, smass, wkind, wpoint, wnormal,
             wmr[k, 1] = 0.0
             wmr[k, 2] = 0.0
         return 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
-    a = s  # branch from the centre to the contact point on the wall surface
+    ma = smat[i]
+    mb = wmat[w]
+    # branch from the centre to the contact point on the wall surface: s = R - delta (deformed),
+    # or R (contact.lever_arm: radius)
+    a = s + (1.0 - prm[ma, mb, P_ARM]) * delta
     wix, wiy, wiz = ws[i, 0], ws[i, 1], ws[i, 2]
     vx = vs[i, 0] - wv[w, 0] - a * (wiy * nz - wiz * ny)
     vy = vs[i, 1] - wv[w, 1] - a * (wiz * nx - wix * nz)
     vz = vs[i, 2] - wv[w, 2] - a * (wix * ny - wiy * nx)
-    ma = smat[i]
-    mb = wmat[w]
     fx, fy, fz, mx, my, mz, ed, ef = contact_law(law, prm, ma, mb, delta, nx, ny, nz, vx, vy, vz,
                                                  wix, wiy, wiz, ri, smass[i], dt,
                                                  wft, wmr, k, friction, rolling)

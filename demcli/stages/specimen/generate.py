@@ -6,7 +6,9 @@ lattice. A ``clump`` template turns each particle into a rigid body of several
 spheres (member centres and radii in units of the drawn radius), with mass and
 inertia of the union of its members (overlaps counted once) and a random
 orientation. In 2D cases the particles are disks in the plane z = region z, with
-masses per ``thickness``.
+masses per ``thickness``. With ``add: true`` the particles join the scene of the stage before
+(:mod:`demcli.stages.specimen.particles`); they are placed without overlap among themselves,
+not against that scene: give them a region clear of it.
 """
 
 import math
@@ -16,6 +18,7 @@ import numpy as np
 from demcli.config.schema import Float, Int, List, Optional, Section, Str, Tagged, Vector
 from demcli.errors import StageError
 from demcli.stages.base import StageType, register_stage
+from demcli.stages.specimen.particles import ADD, check_addable, scene_or_added
 
 REGION = Tagged("shape", {
     "box": Section({"min": Vector(3, "m", doc="lower corner"), "max": Vector(3, "m", doc="upper corner")}),
@@ -53,6 +56,7 @@ FIELDS = {
         "spheres": List(Vector(4), min_len=1, doc="member [x, y, z, r] in units of the particle radius"),
         "resolution": Int(min=16, default=96, doc="voxels along the clump for mass properties"),
     }), doc="rigid clump template (omit for single spheres)"),
+    "add": ADD,
 }
 
 
@@ -103,6 +107,7 @@ def _case_check(cfg, case, k, scene, report):
     """What the case decides: 2D clumps, the lattice's room, and the memory of the particles."""
     from demcli.config.memory import check_memory
 
+    check_addable(cfg, scene, report)
     planar = case.dimension == 2
     if planar and cfg.clump is not None:
         report("clump", "clumps are 3D only in this version; use dimension: 3")
@@ -178,12 +183,10 @@ def run(ctx, cfg, state_in):
                   "material": np.full(n * k, mat, np.int64)}
     bodies = {"x": pos, "v": vel, "q": q, "omega": np.zeros((n, 3)), "mass": mass, "inertia": inertia,
               "id": np.arange(n, dtype=np.int64), "flags": np.zeros(n, np.int8)}
-    state = ctx.new_state(effects=())
-    state.groups["bodies"] = bodies
-    state.groups["spheres"] = sphere
     ctx.log(f"generated {n} {'clumps' if template is not None else 'spheres'} "
-            f"(radius {radii.min() * 1e3:.3g}-{radii.max() * 1e3:.3g} mm, {cfg.placement} placement)")
-    return state
+            f"(radius {radii.min() * 1e3:.3g}-{radii.max() * 1e3:.3g} mm, {cfg.placement} placement)"
+            + (", added to the scene" if cfg.add else ""))
+    return scene_or_added(ctx, cfg, state_in, bodies, sphere)
 
 
 def describe(cfg, case):
@@ -194,6 +197,6 @@ def describe(cfg, case):
 
 
 register_stage(StageType(
-    "generate", FIELDS, run, needs_input=False, check=_check, describe=describe, case_check=_case_check,
+    "generate", FIELDS, run, needs_input=False, adds="add", check=_check, describe=describe, case_check=_case_check,
     provides=("bodies/*", "spheres/*"),
     doc="place spheres or rigid clumps without overlap in a region"))
