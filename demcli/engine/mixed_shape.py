@@ -163,7 +163,7 @@ class MixedShape:
             dt *= math.sqrt(s.mass_scale)
         b = slice(s.nbs, None)
         poly = SimpleNamespace(mass=s.mass[b], inert=s.inert[b], bflags=s.bflags[b], shape=s.pshape,
-                               bmat=s.bmat, prm=s.qprm, walls=s.walls, shapes=s.shapes,
+                               bmat=s.bmat, prm=s.qprm, walls=s.walls, wmat=s.wmat, shapes=s.shapes,
                                _shape_group=s._shape_group)
         return min(float(dt), PolyShape.critical_dt(poly))
 

@@ -166,6 +166,12 @@ FIELDS = {
     "output": Section({
         "records": Int(min=1, default=200, doc="record rows over the run"),
         "snapshots": Int(min=0, default=10, doc="VTU snapshots over the run (plus the first and last)"),
+        "contacts": Optional(Section({
+            "bodies": List(Int(min=0), default=(), doc="body ids whose contacts are recorded (default: every "
+                                                       "contact, scenes of up to 2000 spheres)"),
+        }), doc="a per-contact record at every record row: overlap, normal and tangential force, contact point "
+                "and normal of each touching contact (sphere and clump scenes; records/contacts.csv, "
+                "demcli/stages/contact_record.py)"),
         "checkpoint": Optional(Float("s", min=0, min_inclusive=False),
                                doc="also write a checkpoint at the first record after every this much wall-clock "
                                    "time (for runs longer than a job's time limit); `demcli run --resume` "

@@ -23,6 +23,7 @@ from demcli.errors import InputError, StageError
 from demcli.progress import StopForecast
 from demcli.stages.dem import (build_walls, case_materials, contact_model, declared_effects, lay_walls, phase_models,
                                scene_shape, set_bond_models)
+from demcli.stages.contact_record import COLUMNS as CONTACT_COLUMNS, check_scene, contact_rows
 from demcli.stages.timing import stage_time_step, step_count
 from demcli.stepping import Stepper
 from demcli.state.fields import Field, register, register_group
@@ -226,6 +227,7 @@ def integrate(ctx, cfg, state_in, hooks=None):
     snap_every = max(1, total // cfg.output.snapshots) if cfg.output.snapshots else 0
     energy = plan.has("energy")
     table, wtable = _tables(ckpt, system, plan, hooks)
+    ctable = _contact_table(ckpt, system, cfg.output.get("contacts"))
     ended = None if ckpt is None else ckpt.groups["checkpoint"].get("ended")  # the loop had ended: why
     ended = None if ended is None else str(ended)
     snaps = StageSnapshots(ctx.snapshot_dir, system.plugin.name, resume=ckpt is not None)
@@ -237,13 +239,17 @@ def integrate(ctx, cfg, state_in, hooks=None):
     e_unit = float(system.mass.mean()) * g * d_mean
 
     def record():
-        return _record(system, plan, hooks, table, wtable)
+        row = _record(system, plan, hooks, table, wtable)
+        if ctable is not None:
+            for crow in contact_rows(system, cfg.output.contacts.bodies):
+                ctable.append(crow)
+        return row
 
     def snapshot():
         snaps.write(ctx.state_from(system, plan, extra=None))
 
     def checkpoint(ended=None):
-        return _checkpoint(ctx, system, plan, table, wtable, ended)
+        return _checkpoint(ctx, system, plan, (table, wtable, ctable), ended)
 
     stepper = Stepper(ctx, system)
     if ckpt is None:
@@ -314,7 +320,7 @@ def integrate(ctx, cfg, state_in, hooks=None):
             + (f"; stopped {stopped}" if stopped else ""))
     ctx.throughput = rate
     try:
-        return _outputs(ctx, system, plan, table, wtable, hooks, snapshot if snap_every else None, energy)
+        return _outputs(ctx, system, plan, (table, wtable, ctable), hooks, snapshot if snap_every else None, energy)
     except KeyboardInterrupt:
         with interrupts.deferred(keep=False):
             path = checkpoint(ended=stopped or "")
@@ -374,6 +380,17 @@ def _tables(ckpt, system, plan, hooks):
     return RecordTable("dem", cols), wtable
 
 
+def _contact_table(ckpt, system, spec):
+    """The ``contacts`` record table of ``output.contacts`` (a resumed stage's from its
+    checkpoint), or None without it; InputError for a scene it cannot record."""
+    from demcli.state import RecordTable
+
+    if spec is None:
+        return None
+    check_scene(system, spec)
+    return RecordTable.from_state(ckpt, "contacts") if ckpt is not None else RecordTable("contacts", CONTACT_COLUMNS)
+
+
 def _record(system, plan, hooks, table, wtable):
     """One row into each table, now: the ``dem`` row (kinetic energy, contacts, coordination,
     the effects' and the hooks' columns) and the walls' positions and forces (docs/records.md
@@ -405,9 +422,10 @@ def _record(system, plan, hooks, table, wtable):
     return row
 
 
-def _checkpoint(ctx, system, plan, table, wtable, ended=None):
-    """Write the checkpoint of the system's current state, which must be right after a record
-    (``ended``: why the stepping ended, "" for all steps done, when it has); returns its path."""
+def _checkpoint(ctx, system, plan, tables, ended=None):
+    """Write the checkpoint of the system's current state, which must be right after a record,
+    with the record ``tables`` (None: a table the stage lacks); ``ended``: why the stepping ended,
+    "" for all steps done, when it has. Returns its path."""
     extra = {"checkpoint": {
         "losses0": np.array([system.losses0[k] for k in ("damping", "friction", "body_damping", "wall_work")]),
         "esph": system.esph.copy(), "ebody": system.ebody.copy(), "eacc": system.eacc.copy(),
@@ -419,9 +437,9 @@ def _checkpoint(ctx, system, plan, table, wtable, ended=None):
 
         extra["checkpoint"]["wall_rate"] = system.walls.prm[:, W_RATE].copy()
     st = ctx.state_from(system, plan, extra=extra)
-    table.to_state(st)
-    if wtable is not None:
-        wtable.to_state(st)
+    for t in tables:
+        if t is not None:
+            t.to_state(st)
     return ctx.write_checkpoint(st)
 
 
@@ -438,9 +456,11 @@ def _stop_forecast(cfg, hooks, dt, e_unit, nb):
     return None
 
 
-def _outputs(ctx, system, plan, table, wtable, hooks, snapshot, energy):
+def _outputs(ctx, system, plan, tables, hooks, snapshot, energy):
     """The stage's outputs once its stepping has ended: the final snapshot, the state, the
-    record files and the stage's own (``hooks.finish``)."""
+    record files (``tables``: dem, walls or None, contacts or None) and the stage's own
+    (``hooks.finish``)."""
+    table, wtable, ctable = tables
     if snapshot is not None:
         snapshot()
     st = ctx.state_from(system, plan, extra=None)
@@ -449,6 +469,9 @@ def _outputs(ctx, system, plan, table, wtable, hooks, snapshot, energy):
     if wtable is not None:
         wtable.to_state(st)
         ctx.write_records(wtable, x="time", ys=[c for c in wtable.to_arrays() if c.endswith(".force")])
+    if ctable is not None:
+        ctable.to_state(st)
+        ctx.write_records(ctable, x="time", ys=["fn", "ft"], marker=".")
     if energy:
         ctx.write_records(table, x="time", ys=["kinetic", "strain", "gravity", "damping", "friction",
                                                 "body_damping", "total"], suffix="energy")

@@ -1,0 +1,94 @@
+"""The per-contact record of a dem stage (``output.contacts``): at every record row, one row per
+touching contact of a sphere or clump scene, with its overlap, forces, contact point and normal.
+
+This is what a contact-level validation compares (Chung & Ooi 2011: the force and overlap of an
+impact against time): set ``output.records`` to the steps you want (every step of a short
+impact, for one), and name the bodies to follow in a larger scene. Columns (table
+``contacts``, file ``records/contacts.csv``):
+
+* time [s], step; i: body id of the sphere; j: body id of the other sphere, or -(k + 1) for
+  wall k (walls in the stage's order, box faces as their planes);
+* overlap delta [m] (r_i + r_j - d; r_i - s on a wall);
+* fn [N]: the normal force on i, F . n (> 0 pushes apart; < 0 while a dashpot pulls);
+* ft [N]: the magnitude of its tangential part, and ftx, fty, ftz its components;
+* cx, cy, cz [m]: the contact point where the engine applies the force: R - delta/2 from i's
+  centre (the middle of the overlap) for a pair, R - delta (the wall's surface) on a wall, or R
+  with ``contact.lever_arm: radius``; nx, ny, nz: the unit normal from j (the wall) to i.
+
+A clump's member spheres are recorded as contacts of the clump's body id (two members of one
+clump touching one wall are two rows).
+"""
+
+import math
+
+import numpy as np
+
+from demcli.errors import InputError
+from demcli.state.records import describe_column
+
+COLUMNS = {"time": "s", "step": "1", "i": "1", "j": "1", "overlap": "m", "fn": "N", "ft": "N", "ftx": "N",
+           "fty": "N", "ftz": "N", "cx": "m", "cy": "m", "cz": "m", "nx": "1", "ny": "1", "nz": "1"}
+MAX_ALL = 2000
+"""Largest scene (spheres) whose every contact is recorded; larger ones name their bodies."""
+
+for _name, _label, _unit, _doc in (
+        ("i", "Body", "1", "body id of the sphere"),
+        ("j", "Partner", "1", "body id of the other sphere, or -(k + 1) for wall k"),
+        ("overlap", "Overlap", "m", "r_i + r_j - d, or r_i - s on a wall"),
+        ("fn", "Normal force", "N", "F . n on i, > 0 pushing apart"),
+        ("ft", "Tangential force", "N", "magnitude of the tangential part of the force on i")):
+    describe_column(_name, _label, _unit, table="contacts", integer=_unit == "1", doc=_doc)
+
+
+def check_scene(system, spec):
+    """InputError when the scene cannot be recorded: polyhedra (their contacts are volumes), or
+    every contact of a scene above :data:`MAX_ALL` spheres."""
+    if system.plugin.name != "spheres":
+        raise InputError(f"output.contacts: a per-contact record is for sphere and clump scenes; this one has "
+                         f"{system.plugin.name}")
+    if not len(spec.bodies) and len(system.rad) > MAX_ALL:
+        raise InputError(f"output.contacts: the scene has {len(system.rad)} spheres, more than {MAX_ALL} whose every "
+                         "contact is recorded: name the bodies to follow (output.contacts.bodies)")
+
+
+def _row(system, i, j, delta, n, f, point):
+    fn = float(f @ n)
+    ft = f - fn * n
+    return {"time": system.time, "step": system.step, "i": int(system.body_id[system.sbody[i]]), "j": j,
+            "overlap": float(delta), "fn": fn, "ft": float(np.linalg.norm(ft)), "ftx": float(ft[0]),
+            "fty": float(ft[1]), "ftz": float(ft[2]), "cx": float(point[0]), "cy": float(point[1]),
+            "cz": float(point[2]), "nx": float(n[0]), "ny": float(n[1]), "nz": float(n[2])}
+
+
+def contact_rows(system, bodies=()):
+    """Rows (dicts of :data:`COLUMNS`) of the touching contacts now: sphere pairs, then wall
+    contacts; only those of the body ids ``bodies`` when given."""
+    from demcli.kernels.contact import P_ARM
+    from demcli.kernels.walls import wall_distance
+
+    nl, xs, rad, ids = system.nl, system.xs, system.rad, system.body_id[system.sbody]
+    keep = None if not len(bodies) else np.isin(ids, np.asarray(bodies, np.int64))
+    rows = []
+    for c in np.flatnonzero(nl.act):
+        i, j = int(nl.pi[c]), int(nl.pj[c])
+        if keep is not None and not (keep[i] or keep[j]):
+            continue
+        d = xs[i] - xs[j]
+        dist = math.sqrt(float(d @ d))
+        n = d / dist
+        delta = rad[i] + rad[j] - dist
+        arm = rad[i] - 0.5 * delta * system.prm[system.smat[i], system.smat[j], P_ARM]
+        rows.append(_row(system, i, int(ids[j]), delta, n, nl.fc[c], xs[i] - arm * n))
+    w = system.walls
+    for k in np.flatnonzero(np.any(nl.wfc[:, :3] != 0.0, axis=1)) if len(nl.wfc) else ():
+        i, wall = int(nl.wprim[k]), int(nl.wwall[k])
+        if keep is not None and not keep[i]:
+            continue
+        p, a = system.wpoint[wall], w.normal[wall]
+        s, nx, ny, nz = wall_distance(int(w.kind[wall]), p[0], p[1], p[2], a[0], a[1], a[2], float(w.radius[wall]),
+                                      xs[i, 0], xs[i, 1], xs[i, 2])
+        n = np.array([nx, ny, nz])
+        delta = rad[i] - s
+        arm = s + (1.0 - system.prm[system.smat[i], system.wmat[wall], P_ARM]) * delta
+        rows.append(_row(system, i, -(wall + 1), delta, n, nl.wfc[k, :3], xs[i] - arm * n))
+    return rows
