@@ -5,7 +5,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 TEST_JOBS ?= 2
 
-.PHONY: run test test-nojit stress bench smoke hashes guard clean-jit clean
+.PHONY: run test test-nojit stress bench smoke validate hashes guard clean-jit clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -32,6 +32,10 @@ bench: $(STAMP)
 ## smoke: every case file for a few steps
 smoke: $(STAMP)
 	$(BIN)/python -m pytest -q tests/test_cases.py
+
+## validate: the Chung & Ooi benchmarks against their analytic limits -> docs/validation.md (~1 min)
+validate: $(STAMP)
+	$(BIN)/python -m demcli validate
 
 ## hashes: record the smoke cases' state hashes (before a change that must keep results)
 hashes: $(STAMP)

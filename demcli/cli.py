@@ -159,6 +159,24 @@ def sweep(sweep_file, workers, scheduler, cluster_type, threads_per_run, out, fo
 
 
 @cli.command()
+@click.option("--fast", is_flag=True, help="One material and the ends of each sweep (the subset make test runs).")
+@click.option("--out", type=click.Path(file_okay=False), default="docs", show_default=True,
+              help="Folder of the report: validation.md and validation/chung_ooi_<n>.png.")
+def validate(fast, out):
+    """Run the Chung & Ooi (2011) benchmarks against their analytic limits and write the report;
+    exit code 1 when a check is out of tolerance."""
+    from pathlib import Path
+
+    from demcli.errors import DemcliError
+    from demcli.validation import validate as run_validation
+
+    path, ok = run_validation(Path(out), fast=fast, log=click.echo)
+    click.echo(f"report: {path}")
+    if not ok:
+        raise DemcliError(f"validation: a check is out of tolerance (see {path})")
+
+
+@cli.command()
 def warmup():
     """Compile (and cache) the engine kernels by running a tiny scene."""
     from demcli.check import warmup as _warmup
