@@ -94,17 +94,18 @@ def spin_rotors(g, mb, xref):
 
 
 def _implement(name, inline="never"):
-    """Overload the stub ``name`` with the registered shape's hook, compiled in the caller's
-    context: the overload returns the hook's Python function, so numba compiles it once as the
-    stub's implementation (not a wrapper lambda that calls the separately compiled hook: one
-    function fewer per pass to compile and to link, ~3 s of the polyhedral engine's cold JIT)."""
-    stub = globals()[name]
+    """Overload the engine's entry point ``name`` (the plain-Python function above) with the
+    registered shape's hook, compiled in the caller's context: the overload returns the hook's
+    Python function, so numba compiles it once as the entry point's implementation (not a wrapper
+    lambda that calls the separately compiled hook: one function fewer per pass to compile and to
+    link, ~3 s of the polyhedral engine's cold JIT)."""
+    entry = globals()[name]
 
     def typer(*args):
         return _hook(args[0], name).py_func
 
-    typer.__signature__ = inspect.signature(stub)
-    overload(stub, inline=inline)(typer)
+    typer.__signature__ = inspect.signature(entry)
+    overload(entry, inline=inline)(typer)
 
 
 for _name in ("place", "primitives", "pair_pass", "wall_pass", "worst_overlap", "spin_rotors"):
