@@ -15,6 +15,18 @@ volumetric recipes turn shares into amounts:
   above ``min_size`` is m = V_ag / V_z (P_top - P_min) / 100 and class t gets
   n_t = (P_upper - P_lower) / (P_top - P_min) of it. Class amount S m n_t (S the
   specimen area in 2D or volume in 3D), air voids S VV, mastic (binder and fines) the rest.
+
+The asphalt recipe may carry a ``mix_design`` section: the Asphalt Institute's volumetric
+analysis (MS-2, 7th ed., "Volumetric properties") of the same mix, reported beside the
+recipe and not fed back into it (:func:`ms2_volumetrics`). Inputs: the aggregate's bulk and
+effective specific gravities Gsb and Gse, optionally the compacted mix's bulk specific
+gravity Gmb; Pb = 100 ``asphalt_content`` and Gb = ``binder_density`` / 1000 kg/m^3 (water
+taken as 1000 kg/m^3, as the other densities here; at 25 C water is 997 kg/m^3, 0.3 % less,
+so give ``binder_density`` = 1000 Gb to reproduce a laboratory Gb exactly). Without Gmb the
+mix is taken at the recipe's air voids, Gmb = Gmm (1 - VV); with Gmb, its air voids
+Va = 100 (Gmm - Gmb) / Gmm must match 100 VV within 0.1 percentage point (the precision Va
+is reported to), since VV is what the specimen is built with. Gse < Gsb (negative absorbed
+binder) and an absorbed binder at or above the binder content (Pbe <= 0) are refused.
 """
 
 import math
@@ -37,6 +49,9 @@ for _name, _kind, _dims, _unit, _doc in [
         ("class_count", "f", ("n_class",), "1", "estimated particle count of each class"),
         ("totals", "f", ("n_total",), "m^3 or m^2", "specimen, solids or aggregate, voids, mastic amounts")]:
     register(Field(f"gradation/{_name}", _kind, _dims, _unit, _doc, writer="stage gradation"))
+register(Field("gradation/mix_design", "f", ("n_mix",), "1 or %",
+               "MS-2 volumetrics (asphalt mix_design only): Gsb, Gse, Gb, Pb %, Gmb, Gmm, Va %, VMA %, "
+               "VFA %, Pba % of aggregate, Pbe %", writer="stage gradation", required=False))
 
 describe_column("sieve", "Sieve size", "mm", ticks="values", doc="square-hole sieve aperture")
 describe_column("passing", "Passing", "%", doc="mass percent passing the sieve")
@@ -46,6 +61,28 @@ describe_column("share", "Class share", "%", table="classes", doc="mass percent 
 
 TOTALS = ("specimen", "aggregate", "voids", "mastic")
 
+# name, unit, label, meaning: the order of gradation/mix_design and the columns of records/volumetrics
+MIX_DESIGN = (
+    ("Gsb", "1", "Aggregate bulk specific gravity", "oven-dry bulk specific gravity of the combined aggregate"),
+    ("Gse", "1", "Aggregate effective specific gravity", "effective specific gravity of the aggregate "
+                                                              "(its volume less the pores that absorb binder)"),
+    ("Gb", "1", "Binder specific gravity", "binder_density / 1000 kg/m^3"),
+    ("Pb", "%", "Binder content", "binder, percent by mass of mix"),
+    ("Gmb", "1", "Mix bulk specific gravity", "compacted mix, as given or Gmm (1 - air_voids)"),
+    ("Gmm", "1", "Mix maximum specific gravity", "the mix without air voids, 100 / (Ps/Gse + Pb/Gb)"),
+    ("Va", "%", "Air voids", "100 (Gmm - Gmb) / Gmm, percent of the bulk volume of mix"),
+    ("VMA", "%", "Voids in mineral aggregate", "100 - Gmb Ps / Gsb, percent of the bulk volume of mix"),
+    ("VFA", "%", "Voids filled with asphalt", "100 (VMA - Va) / VMA, percent of VMA"),
+    ("Pba", "%", "Absorbed binder", "100 Gb (Gse - Gsb) / (Gsb Gse), percent by mass of aggregate"),
+    ("Pbe", "%", "Effective binder content", "Pb - Pba Ps / 100, percent by mass of mix"),
+)
+MIX_NAMES = tuple(name for name, *_ in MIX_DESIGN)
+for _name, _unit, _label, _doc in MIX_DESIGN:
+    describe_column(_name, _label, _unit, table="volumetrics", doc=_doc)
+
+WATER_DENSITY = 1000.0  # kg/m^3: Gb = binder_density / WATER_DENSITY (see the module docstring)
+AIR_VOIDS_TOLERANCE = 0.1  # percentage points between Va from a given Gmb and 100 air_voids
+
 SPECIMEN = Tagged("shape", {
     "circle": Section({"radius": Float("m", min=0, min_inclusive=False)}),
     "rectangle": Section({"width": Float("m", min=0, min_inclusive=False),
@@ -54,6 +91,36 @@ SPECIMEN = Tagged("shape", {
                          "height": Float("m", min=0, min_inclusive=False)}),
     "box": Section({"size": Vector(3, "m", min=0, min_inclusive=False)}),
 }, doc="the specimen or bed the amounts are for (circle/rectangle: 2D area; cylinder/box: volume)")
+
+MIX_DESIGN_SECTION = Section({
+    "aggregate_bulk_specific_gravity": Float(min=0, min_inclusive=False, doc="Gsb of the combined aggregate"),
+    "aggregate_effective_specific_gravity": Float(min=0, min_inclusive=False,
+                                                  doc="Gse of the aggregate, >= Gsb"),
+    "mix_bulk_specific_gravity": Optional(Float(min=0, min_inclusive=False),
+                                          doc="Gmb of the compacted mix (none: Gmm (1 - air_voids))"),
+}, doc="MS-2 volumetric analysis of the mix, reported beside the recipe (Gmm, Va, VMA, VFA, Pba, Pbe)")
+
+
+def _check_mix_design(v, report):
+    """Gse >= Gsb, an effective binder content above zero, Gmb matching the air voids."""
+    if v.mix_design is None:
+        return
+    md = v.mix_design
+    gsb, gse = md.aggregate_bulk_specific_gravity, md.aggregate_effective_specific_gravity
+    if gse < gsb:
+        report("mix_design.aggregate_effective_specific_gravity",
+               f"must be >= the bulk specific gravity Gsb = {gsb:g} (else the absorbed binder is negative)", gse)
+        return
+    vol = mix_design(v)
+    if vol["Pbe"] <= 0:
+        report("mix_design.aggregate_effective_specific_gravity",
+               f"leaves no effective binder: the aggregate absorbs Pba = {vol['Pba']:.3g} % of its mass, "
+               f"the binder content is Pb = {vol['Pb']:g} %", gse)
+    elif abs(vol["Va"] - 100.0 * v.air_voids) > AIR_VOIDS_TOLERANCE:
+        report("mix_design.mix_bulk_specific_gravity",
+               f"gives air voids Va = {vol['Va']:.2f} %, but air_voids is {100.0 * v.air_voids:g} % "
+               f"(they must agree within {AIR_VOIDS_TOLERANCE:g} percentage point)", md.mix_bulk_specific_gravity)
+
 
 FIELDS = {
     "sieves": List(Float("m", min=0, min_inclusive=False), min_len=1, doc="square-hole sieve apertures, ascending"),
@@ -76,7 +143,8 @@ FIELDS = {
             "air_voids": Float(min=0, max=1, max_inclusive=False, doc="VV, volume fraction"),
             "min_size": Float("m", min=0, min_inclusive=False,
                               doc="smallest aggregate modelled as particles (finer is mastic)"),
-        }),
+            "mix_design": Optional(MIX_DESIGN_SECTION),
+        }, check=_check_mix_design),
     }),
 }
 
@@ -154,6 +222,50 @@ def asphalt_volumetrics(ratio, rho_agg, rho_b, vv, p_top, p_min):
     return v_ag, v_as, v_z, v_ag / v_z * (p_top - p_min) / 100.0
 
 
+def max_specific_gravity(gse, gb, pb):
+    """Gmm = 100 / (Ps/Gse + Pb/Gb), Ps = 100 - Pb: the mix without air voids (MS-2).
+
+    gse, gb: specific gravities of the aggregate (effective) and the binder [-];
+    pb: binder content, percent by mass of mix.
+    """
+    return 100.0 / ((100.0 - pb) / gse + pb / gb)
+
+
+def ms2_volumetrics(gsb, gse, gb, pb, gmb):
+    """Volumetric analysis of a compacted asphalt mix (Asphalt Institute MS-2, 7th ed.).
+
+    Inputs: gsb, gse: bulk and effective specific gravities of the aggregate; gb: binder
+    specific gravity; pb: binder content [% by mass of mix]; gmb: bulk specific gravity of
+    the compacted mix. With Ps = 100 - Pb:
+
+    * Gmm = 100 / (Ps/Gse + Pb/Gb)
+    * Pba = 100 Gb (Gse - Gsb) / (Gsb Gse)   [% by mass of aggregate]
+    * Pbe = Pb - Pba Ps / 100                [% by mass of mix]
+    * Va = 100 (Gmm - Gmb) / Gmm             [% of the bulk volume of mix]
+    * VMA = 100 - Gmb Ps / Gsb               [% of the bulk volume of mix]
+    * VFA = 100 (VMA - Va) / VMA             [% of VMA]
+
+    Returns a dict in the order of :data:`MIX_NAMES` (inputs first).
+    """
+    ps = 100.0 - pb
+    gmm = max_specific_gravity(gse, gb, pb)
+    pba = 100.0 * gb * (gse - gsb) / (gsb * gse)
+    va = 100.0 * (gmm - gmb) / gmm
+    vma = 100.0 - gmb * ps / gsb
+    return dict(Gsb=gsb, Gse=gse, Gb=gb, Pb=pb, Gmb=gmb, Gmm=gmm, Va=va, VMA=vma, VFA=100.0 * (vma - va) / vma,
+                Pba=pba, Pbe=pb - pba * ps / 100.0)
+
+
+def mix_design(v):
+    """:func:`ms2_volumetrics` of an asphalt ``volumetrics`` node with a ``mix_design`` section."""
+    md = v.mix_design
+    gse, gb, pb = md.aggregate_effective_specific_gravity, v.binder_density / WATER_DENSITY, 100.0 * v.asphalt_content
+    gmb = md.mix_bulk_specific_gravity
+    if gmb is None:
+        gmb = max_specific_gravity(gse, gb, pb) * (1.0 - v.air_voids)
+    return ms2_volumetrics(md.aggregate_bulk_specific_gravity, gse, gb, pb, gmb)
+
+
 def compute(cfg):
     """Class bounds, shares, amounts, counts and totals of a validated gradation config."""
     lower, upper, share = _classes(cfg)
@@ -176,8 +288,11 @@ def compute(cfg):
         count = amount / unit
         voids = amount_s * v.air_voids
         totals = np.array([amount_s, amount_s * m, voids, amount_s - amount_s * m - voids])
-    return dict(class_lower=lower, class_upper=upper, class_share=share, class_amount=amount,
-                class_count=count, totals=totals, dim=dim)
+    res = dict(class_lower=lower, class_upper=upper, class_share=share, class_amount=amount,
+               class_count=count, totals=totals, dim=dim)
+    if v.kind == "asphalt" and v.mix_design is not None:
+        res["mix_design"] = np.array(list(mix_design(v).values()))
+    return res
 
 
 def run(ctx, cfg, state_in):
@@ -205,7 +320,30 @@ def run(ctx, cfg, state_in):
     ctx.log(f"{len(res['class_share'])} classes; specimen {t['specimen']:.4g} {unit}, aggregate "
             f"{t['aggregate']:.4g} {unit}, voids {t['voids']:.4g} {unit}, mastic {t['mastic']:.4g} {unit}; "
             f"estimated {res['class_count'].sum():.0f} particles")
+    if "mix_design" in res:
+        _write_mix_design(ctx, cfg, state, res["mix_design"])
     return state
+
+
+def _write_mix_design(ctx, cfg, state, values):
+    """The ``volumetrics`` record table (state and CSV, one row) and the log line of the MS-2 analysis."""
+    from demcli.state import RecordTable
+
+    vol = dict(zip(MIX_NAMES, values))
+    table = RecordTable("volumetrics", {name: unit for name, unit, *_ in MIX_DESIGN})
+    table.append(vol)
+    table.to_state(state)
+    folder = ctx.runner.run_dir / "records"
+    folder.mkdir(parents=True, exist_ok=True)
+    table.write_csv(folder / f"{ctx.name}_volumetrics.csv")
+    ctx.log(_mix_design_line(vol, cfg.volumetrics.mix_design))
+
+
+def _mix_design_line(vol, md):
+    """``MS-2: Gmb 2.364 (given), Gmm 2.481, Va 4.7 %, ...`` for the log and ``demcli check``."""
+    source = "given" if md.mix_bulk_specific_gravity is not None else "from air_voids"
+    return (f"MS-2: Gmb {vol['Gmb']:.3f} ({source}), Gmm {vol['Gmm']:.3f}, Va {vol['Va']:.1f} %, "
+            f"VMA {vol['VMA']:.1f} %, VFA {vol['VFA']:.1f} %, Pba {vol['Pba']:.2f} %, Pbe {vol['Pbe']:.2f} %")
 
 
 def empty_bodies():
@@ -229,11 +367,14 @@ def _case_check(cfg, case, k, scene, report):
 
 
 def describe(cfg, case):
-    """One line for ``demcli check``: classes and totals."""
+    """One line for ``demcli check``: classes and totals (and the MS-2 volumetrics when asked)."""
     res = compute(cfg)
     unit = "m^2" if res["dim"] == 2 else "m^3"
-    return (f"{len(res['class_share'])} classes ({cfg.volumetrics.kind}); "
+    line = (f"{len(res['class_share'])} classes ({cfg.volumetrics.kind}); "
             + ", ".join(f"{k} {v:.4g} {unit}" for k, v in zip(TOTALS, res["totals"])))
+    if "mix_design" in res:
+        line += "; " + _mix_design_line(dict(zip(MIX_NAMES, res["mix_design"])), cfg.volumetrics.mix_design)
+    return line
 
 
 register_stage(StageType("gradation", FIELDS, run, needs_input=False, check=_check, describe=describe,
