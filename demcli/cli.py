@@ -10,6 +10,8 @@ SET_HELP = ("Override a case value (the value is read as YAML). PATH is dotted k
             "index or its name, with or without brackets: stages.settle.walls[1].max or stages.settle.walls.1.max, "
             "and stages.settle.walls.lid.max or stages.settle.walls[lid].max for the wall named lid. "
             "E.g. --set stages.settle.time.duration=0.1s")
+# demcli.geometry.projection.METHODS, spelt out so that starting the command line loads no scipy
+SIEVE_METHODS = ("projection", "volume_sphere", "volume_cube", "inertia_square")
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
@@ -174,6 +176,35 @@ def validate(fast, out):
     click.echo(f"report: {path}")
     if not ok:
         raise DemcliError(f"validation: a check is out of tolerance (see {path})")
+
+
+@cli.command()
+@click.argument("files", nargs=-1, required=True, type=click.Path(dir_okay=False, exists=True))
+@click.option("--sieves", metavar="LENGTHS",
+              help="Square-hole apertures, ascending, a comma list with units as in case files: "
+                   "16mm,25mm,31.5mm (a plain number is in m).")
+@click.option("--method", type=click.Choice(SIEVE_METHODS), default="projection", show_default=True,
+              help="Sieve size: projection (the least shadow's bounding rectangle, Shao et al. 2017), volume_sphere "
+                   "or volume_cube (the sphere's diameter or cube's edge of equal volume), inertia_square (the "
+                   "shadow across the least-inertia axis; polyhedra and spheres only).")
+@click.option("--density", metavar="DENSITY",
+              help="Density of the 3D particles of mesh and CSV files, e.g. 2650kg/m3 (state files carry their "
+                   "masses); without it they are weighed by volume.")
+@click.option("--target", metavar="PASSING",
+              help="Target percent passing at each sieve, a comma list such as 0,10,60,100 (needs --sieves): "
+                   "the class shares are compared with it.")
+@click.option("--unit", default="m", show_default=True, metavar="LENGTH",
+              help="Unit of the coordinates in mesh and CSV files, e.g. mm.")
+@click.option("--out", default="sieve", show_default=True, type=click.Path(file_okay=False),
+              help="Folder for particles.csv and, with --sieves, passing.csv, classes.csv and passing.png.")
+def sieve(files, sieves, method, density, target, unit, out):
+    """Size the particles of FILES and sieve them. FILES are state files (.h5), meshes (.obj, .stl, .ply,
+    .off: each connected part one particle, sized as the convex hull of its vertices) or vertex tables
+    (.csv with the header particle,x,y,z, or particle,x,y for 2D polygons)."""
+    from demcli.sieving import sieve_files
+
+    result = sieve_files(files, sieves=sieves, method=method, density=density, target=target, unit=unit, out=out)
+    click.echo(result.summary())
 
 
 @cli.command()
