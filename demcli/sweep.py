@@ -3,7 +3,8 @@
 A sweep file lists runs, each a case plus ``--set``-style overrides, with two generators
 that expand to a grid: ``seeds: [1, 2, 3]`` (the case's top-level ``seed``) and
 ``vary: {path: [v1, v2]}`` (every combination; the first path changes slowest, seeds
-fastest). It also names the metrics to gather (``STAGE.TABLE.COLUMN[@REDUCER]``, read as
+fastest; a path written ``+path`` pairs its values with the path before it, as ``demcli study
+--vary +PATH`` does). It also names the metrics to gather (``STAGE.TABLE.COLUMN[@REDUCER]``, read as
 ``demcli study`` reads them) and, optionally, the output folder and the cluster::
 
     out: sweeps/beads_seeds           # default sweeps/<sweep file name>; --out wins
@@ -136,7 +137,8 @@ class _Seeds(Field):
 def sweep_schema():
     """The sweep file schema (a :class:`demcli.config.Section`; keys in docs/sweep.md)."""
     overrides = Map(_Value(), default={}, doc="case path (as --set takes it) -> value")
-    vary = Optional(Map(List(_Value(), min_len=1)), doc="case path -> values; every combination is a run")
+    vary = Optional(Map(List(_Value(), min_len=1)), doc="case path -> values; every combination is a run; a +path pairs its values with the "
+                                                   "path before it (one axis, as demcli study's --vary +PATH)")
     seeds = Optional(_Seeds(), doc="values of the case's top-level seed, one run each")
     run = Section({
         "case": Str(doc="case file, relative to the sweep file"),
@@ -197,7 +199,7 @@ def _grid(top, k, run):
         dup = sorted({t for t in texts if texts.count(t) > 1})
         if dup:
             issues.append((vary_at + (p,), "a value is given twice", dup[0], None))
-        if p in fixed:
+        if p.lstrip("+") in fixed:
             issues.append((vary_at + (p,), "the path is also given in set; drop one of them", p, None))
     if seeds is not None:
         dup = sorted({x for x in seeds if list(seeds).count(x) > 1})
@@ -209,7 +211,8 @@ def _grid(top, k, run):
                                          "drop one of them", NOVALUE, None))
     if issues:
         return issues
-    varies = [Vary(p, tuple(_text(v) for v in values)) for p, values in (vary or {}).items()]
+    varies = [Vary(p.lstrip("+"), tuple(_text(v) for v in values), along=p.startswith("+"))  # +path: joins the one before
+              for p, values in (vary or {}).items()]
     if seeds is not None:
         varies.append(Vary("seed", tuple(str(x) for x in seeds)))
     name = _run_name(run)

@@ -80,6 +80,31 @@ runs:
     assert plan.runs[-1].overrides == ["stages.settle.time.steps=300", "stages.pour.count=100", "seed=7"]
 
 
+def test_a_plus_path_pairs_its_values_with_the_path_before_it(tmp_path):
+    # Given two paths varied together (+path) and one crossing them
+    path = _sweep_file(tmp_path, f"""\
+set: {{{SHORT}}}
+runs:
+  - case: CASE
+    vary:
+      stages.settle.time.dt_factor: [0.25, 0.1]
+      +stages.pour.count: [100, 120]
+      stages.pour.radius.min: [1 mm, 2 mm]
+""")
+    # When it is planned
+    plan = plan_sweep(path, out=tmp_path / "out")
+    # Then the paired paths make one axis (2 x 2 runs, not 2 x 2 x 2), both written as overrides
+    assert [r.id for r in plan.runs] == [f"beads/dt_factor={dt},min={m}" for dt in ("0.25", "0.1")
+                                         for m in ("1mm", "2mm")]
+    assert plan.runs[2].overrides == ["stages.settle.time.steps=300", "stages.settle.time.dt_factor=0.1",
+                                      "stages.pour.count=120", "stages.pour.radius.min=1 mm"]
+    # And a + path with a different number of values is refused with its key
+    bad = _sweep_file(tmp_path, "runs:\n  - case: CASE\n    vary:\n      stages.settle.time.dt_factor: [0.25, 0.1]\n"
+                                "      +stages.pour.count: [100]\n", name="bad.yaml")
+    result = _invoke(["sweep", bad, "--check"])
+    assert result.exit_code == 2 and "runs[0].vary" in result.output and "pair" in result.output, result.output
+
+
 @pytest.mark.parametrize("value, text", [("2 mm", "2 mm"), ([0, 0, -9.81], "[0, 0, -9.81]"), (1e-5, "1.0e-05"),
                                          ("3", "'3'"), (True, "true"), ({"mu": 0.3}, "{mu: 0.3}")])
 def test_values_are_written_as_set_reads_them(value, text):
@@ -270,7 +295,8 @@ cluster: {{type: slurm, workers: 1, options: {{memory: 1GB, walltime: "00:10:00"
 
 
 def test_shipped_sweeps_validate():
-    for path in sorted((BEADS.parent.parent / "sweeps").glob("*.yaml")):
+    cases = BEADS.parent.parent
+    for path in sorted([*(cases / "sweeps").glob("*.yaml"), *(cases / "validation").glob("*_sweep.yaml")]):
         plan = check_sweep(path, echo=lambda line: None)
         assert plan.runs and not plan.invalid, path
 
