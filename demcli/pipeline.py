@@ -223,7 +223,9 @@ class Runner:
         state.groups["materials"] = {
             "name": np.array(names, dtype=object),
             **{k: np.array([mats[n][k] for n in names], float)
-               for k in ("density", "young", "poisson", "friction", "rolling_friction", "restitution")}}
+               for k in ("density", "young", "poisson", "friction", "rolling_friction", "restitution")},
+            "shear": np.array([mats[n]["young"] / (2 * (1 + mats[n]["poisson"])) if mats[n]["shear"] is None
+                               else mats[n]["shear"] for n in names], float)}
 
     def output_path(self, k):
         return self.run_dir / f"{k:02d}-{self.case.stages[k].name}.h5"

@@ -219,6 +219,8 @@ _reg("materials", "poisson", "f", ("n_m",), "1", "Poisson's ratio", finite=True)
 _reg("materials", "friction", "f", ("n_m",), "1", "sliding friction coefficient", finite=True)
 _reg("materials", "rolling_friction", "f", ("n_m",), "1", "rolling friction coefficient", finite=True)
 _reg("materials", "restitution", "f", ("n_m",), "1", "coefficient of restitution", finite=True)
+_reg("materials", "shear", "f", ("n_m",), "Pa", "shear modulus G of the tangential stiffness: the case's, else "
+     "E / (2 (1 + nu))", required=False, finite=True, positive=True)
 
 register_group("walls", "Rigid walls: planes and cylinders", writer="effect walls")
 _W = dict(writer="effect walls")

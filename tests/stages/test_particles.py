@@ -156,3 +156,17 @@ def test_add_is_refused_where_there_is_no_scene_or_a_polyhedral_one(tmp_path):
                     "    particles: [{x: [0.1, 0.1, 0.5], radius: 10 mm, material: ballast}]\n")
     result = CliRunner().invoke(cli, ["check", str(path)])
     assert result.exit_code == 2 and "polyhedra" in result.output, result.output
+
+
+def test_the_state_keeps_each_materials_shear_modulus(tmp_path):
+    # Given: one material with the default G and one with its own (#29: materials.<m>.shear)
+    path = _case(tmp_path, INLINE)
+    path.write_text(path.read_text().replace(
+        "friction: 0.3}\n", "friction: 0.3}\n  rubber: {density: 1100 kg/m^3, young: 5 MPa, poisson: 0.49, "
+                           "shear: 1 MPa}\n", 1))
+    # When: the particles stage runs
+    run_case(path, out=tmp_path / "run", quiet=True, threads=1, only="ball")
+    # Then: the state's materials group holds E / (2 (1 + nu)) and the given value, exactly
+    m = read_state(tmp_path / "run" / "00-ball.h5").groups["materials"]
+    assert list(m["name"]) == ["glass", "rubber"]
+    assert m["shear"].tolist() == [50e6 / (2 * 1.3), 1e6]
