@@ -33,7 +33,7 @@ bench: $(STAMP)
 smoke: $(STAMP)
 	$(BIN)/python -m pytest -q tests/test_cases.py
 
-## validate: the Chung & Ooi benchmarks against their analytic limits -> docs/validation.md (~1 min)
+## validate: the Chung & Ooi benchmarks and the analytic checks against their references -> docs/validation.md (~2 min)
 validate: $(STAMP)
 	$(BIN)/python -m demcli validate
 

@@ -33,7 +33,12 @@ per-contact record), and compares it with the analytic reference at its stated t
 
 Outside the sliding ranges the outcome depends on the tangential compliance (Maw, Barber &
 Fawcett 1976); those points are plotted beside the curves Kratos digitised from the paper,
-without a pass/fail. Inputs and their sources: docs/validation/chung_ooi_inputs.md. The fast
+without a pass/fail.
+
+Two analytic checks follow, as cases and sweep files beside the others (Hertz is tests 1 and 2):
+the linear spring-dashpot impact (``spring_dashpot``: rebound e, duration pi / omega_d and peak
+overlap of the damped oscillator, 0.5 %) and a Burgers bond creeping under a constant load
+(``burgers_creep``: the stretch against the creep curve at five times, 1 %). Inputs and their sources: docs/validation/chung_ooi_inputs.md. The fast
 subset (``--fast``: each sweep file's first run, the ends of its sweep) runs in ``make test``.
 """
 
@@ -75,9 +80,9 @@ class Check:
 @dataclass
 class Outcome:
     """The checks of one test (``part``: a letter when a test has two figures) and the series its
-    figure plots."""
+    figure plots. ``test``: the Chung & Ooi test number, or the name of an analytic check."""
 
-    test: int
+    test: object
     title: str
     checks: list = field(default_factory=list)
     series: dict = field(default_factory=dict)  # label -> (x, y, style)
@@ -89,6 +94,19 @@ class Outcome:
     @property
     def key(self):
         return f"{self.test}{self.part}"
+
+    @property
+    def paper(self):
+        return isinstance(self.test, int)
+
+    @property
+    def file(self):
+        """The figure's file name (no suffix)."""
+        return f"chung_ooi_{self.key}" if self.paper else self.key
+
+    @property
+    def heading(self):
+        return f"Test {self.key}: {self.title}" if self.paper else f"Analytic check: {self.title}"
 
 
 @dataclass
@@ -108,11 +126,14 @@ class Run:
 
         return read_state(next(self.folder.glob(f"{1 if after else 0:02d}-*.h5")))
 
-    def motion(self, after=True):
-        """(v, omega) of the bodies in the order of their ids (a stage may sort them), (n, 3) each."""
+    def bodies(self, key, after=True):
+        """Column ``key`` (x, v, omega, ...) of the bodies in the order of their ids (a stage may sort them)."""
         b = self.state(after).groups["bodies"]
-        order = np.argsort(b["id"])
-        return b["v"][order], b["omega"][order]
+        return b[key][np.argsort(b["id"])]
+
+    def motion(self, after=True):
+        """(v, omega) of the bodies, (n, 3) each."""
+        return self.bodies("v", after), self.bodies("omega", after)
 
     def material(self, key, k=0):
         """Property ``key`` of the case's k-th material (its density, young, restitution, ...)."""
@@ -130,14 +151,20 @@ class Run:
         return read_record(self.folder / "records" / f"impact_{table}.csv")[0]
 
 
+def _case_name(n):
+    """``chung_ooi_<n>`` for a test number, else the analytic check's own name."""
+    return f"chung_ooi_{n}" if isinstance(n, int) else n
+
+
 def sweep_runs(n, work, fast=False):
-    """Run the runs of ``cases/validation/chung_ooi_<n>_sweep.yaml`` one after another (``fast``:
-    the first run name's first and last grid points); returns {run name: [Run, ...]}."""
+    """Run the runs of ``cases/validation/<case>_sweep.yaml`` (``chung_ooi_<n>`` for test n, or an
+    analytic check's name) one after another (``fast``: the first run name's first and last grid
+    points); returns {run name: [Run, ...]}."""
     from demcli import run_case
     from demcli.errors import InputError
     from demcli.sweep import plan_sweep
 
-    plan = plan_sweep(CASES / f"chung_ooi_{n}_sweep.yaml", out=work / f"test{n}")
+    plan = plan_sweep(CASES / f"{_case_name(n)}_sweep.yaml", out=work / str(n))
     if plan.invalid:
         raise InputError(f"{plan.path}: {plan.invalid[0].id}: {plan.invalid[0].problem}")
     groups = {}
@@ -403,6 +430,61 @@ def unequal_spheres(groups):
     return out
 
 
+def spring_dashpot(groups):
+    """The linear spring-dashpot impact against the damped oscillator: rebound ratio e, duration
+    pi / omega_d and peak overlap (v / omega_d) exp(-zeta omega_n t*) sin(omega_d t*) at
+    tan(omega_d t*) = sqrt(1 - zeta^2) / zeta, all 0.5 %."""
+    out = Outcome("spring_dashpot", "linear spring-dashpot impact", xlabel="Time (us)",
+                  ylabel="Normal force (N)")
+    for runs in groups.values():
+        for r in runs:
+            e, radius = r.material("restitution"), r.radius()
+            mstar = r.material("density") * 4 / 3 * math.pi * radius ** 3 / 2
+            kn = 1.0e5  # spring_dashpot.yaml
+            v0 = r.motion(after=False)[0]
+            speed = float(v0[0, 0] - v0[1, 0])
+            zeta = -math.log(e) / math.sqrt(math.pi ** 2 + math.log(e) ** 2) if e < 1 else 0.0
+            wn = math.sqrt(kn / mstar)
+            wd = wn * math.sqrt(1 - zeta * zeta)
+            ts = math.atan2(math.sqrt(1 - zeta * zeta), zeta) / wd
+            dmax = speed / wd * math.exp(-zeta * wn * ts) * math.sin(wd * ts)
+            rec = r.record("contacts")
+            t = rec["time"] - rec["time"][0]
+            dt = float(np.median(np.diff(rec["time"])))
+            v = r.motion()[0]
+            setting = f"e = {e:g}"
+            out.checks += [Check("spring_dashpot", setting, "rebound / approach speed", e,
+                                 float(v[1, 0] - v[0, 0]) / speed, 5e-3),
+                           Check("spring_dashpot", setting, "duration [s]", math.pi / wd, float(t[-1] + dt), 5e-3),
+                           Check("spring_dashpot", setting, "peak overlap [m]", dmax, float(rec["overlap"].max()), 5e-3)]
+            out.series[setting] = (t * 1e6, rec["fn"], "-")
+    return out
+
+
+def burgers_creep(groups):
+    """A Burgers bond under a constant load: the stretch at the end of each run against the creep
+    curve u = F/K_m + F t/C_m + F/K_k (1 - exp(-t K_k/C_k)) (Findley, Lai & Onaran 1976), 1 %."""
+    km, cm, kk, ck = 1.0e4, 1.0e4, 1.0e4, 3.0e3  # burgers_creep.yaml
+    out = Outcome("burgers_creep", "Burgers bond creep under a constant load", xlabel="Time (s)",
+                  ylabel="Stretch (um)")
+    times, got = [], []
+    for runs in groups.values():
+        for r in runs:
+            x0, x1 = r.bodies("x", after=False), r.bodies("x")
+            force = float(r.bodies("mass")[1]) * 9.81  # its weight, pulling along the bond
+            times.append(float(r.state().meta["time"]))
+            got.append(float(x1[1, 0] - x0[1, 0]))
+            ref = force / km + force * times[-1] / cm + force / kk * (1 - math.exp(-times[-1] * kk / ck))
+            out.checks.append(Check("burgers_creep", f"t = {times[-1]:.3g} s", "stretch [m]", ref, got[-1], 1e-2))
+    grid = np.linspace(0.0, max(times, default=1.0), 200)
+    curve = force / km + force * grid / cm + force / kk * (1 - np.exp(-grid * kk / ck)) if times else grid
+    out.series["demcli"] = (np.array(times), np.array(got) * 1e6, "o")
+    out.series["Burgers creep"] = (grid, curve * 1e6, "k:")
+    out.note = ("Viscous damping (alpha = sqrt(K_m / m) / 2) removes the bond's oscillation; its drag and the "
+                "transient make the stretch lag the curve by a few 1e-3 early on.")
+    return out
+
+
 def run_suite(work, fast=False, log=print):
     """Every test's Outcome; ``fast``: the first run of each sweep file, the ends of its sweep (so
     test 7's co-rotating runs are left out)."""
@@ -417,7 +499,9 @@ def run_suite(work, fast=False, log=print):
             lambda: restitution(sweep_runs(3, work, fast)), lambda: angled(sweep_runs(4, work, fast)),
             lambda: oblique(sweep_runs(5, work, fast)), lambda: spinning(sweep_runs(6, work, fast)),
             lambda: counter_rotating(test7("counter")), lambda: co_rotating(test7("co-rotating")),
-            lambda: unequal_spheres(sweep_runs(8, work, fast))]
+            lambda: unequal_spheres(sweep_runs(8, work, fast)),
+            lambda: spring_dashpot(sweep_runs("spring_dashpot", work, fast)),
+            lambda: burgers_creep(sweep_runs("burgers_creep", work, fast))]
     outcomes = []
     for step in plan:
         o = step()
@@ -440,7 +524,7 @@ def figure(outcome, path):
         ax.plot(x, y, style, label=label, markersize=4)
     ax.set_xlabel(outcome.xlabel)
     ax.set_ylabel(outcome.ylabel)
-    ax.set_title(f"Chung & Ooi test {outcome.key}: {outcome.title}")
+    ax.set_title(f"Chung & Ooi test {outcome.key}: {outcome.title}" if outcome.paper else outcome.heading)
     ax.grid(alpha=0.3)
     ax.legend(fontsize=7)
     fig.tight_layout()
@@ -451,7 +535,7 @@ def report(outcomes, folder, name="validation.md"):
     """Write the Markdown report and the figures into ``folder``; returns (path, all passed)."""
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
-    lines = ["# Validation: Chung & Ooi (2011) particle-impact benchmarks", "",
+    lines = ["# Validation: the Chung & Ooi (2011) particle-impact benchmarks and analytic checks", "",
              "Written by `demcli validate` (demcli/validation.py: the cases, the references and the "
              "tolerances; the cases are cases/validation/chung_ooi_<n>.yaml). Inputs and their sources: "
              "[chung_ooi_inputs.md](validation/chung_ooi_inputs.md). Every case uses `contact.lever_arm: radius` "
@@ -459,12 +543,14 @@ def report(outcomes, folder, name="validation.md"):
              "force ([contact.md](contact.md)). Each test's runs are a sweep file beside its case "
              "(cases/validation/chung_ooi_<n>_sweep.yaml, runnable with `demcli sweep`). Two set-ups are not "
              "certain from the public decks (chung_ooi_inputs.md): test 7's spins are opposite, as every deck sets "
-             "them (7b adds equal spins), and test 8's case A is read as a large sphere rigid in shear.", ""]
+             "them (7b adds equal spins), and test 8's case A is read as a large sphere rigid in shear. Two analytic "
+             "checks close the report: the linear spring-dashpot impact and a Burgers bond's creep (cases "
+             "spring_dashpot.yaml and burgers_creep.yaml; Hertz is tests 1 and 2).", ""]
     ok = True
     for o in outcomes:
-        png = f"validation/chung_ooi_{o.key}.png"
+        png = f"validation/{o.file}.png"
         figure(o, folder / png)
-        lines += [f"## Test {o.key}: {o.title}", "", f"![test {o.key}]({png})", "",
+        lines += [f"## {o.heading}", "", f"![{o.key}]({png})", "",
                   *([o.note, ""] if o.note else []),
                   "| setting | quantity | reference | measured | error | tolerance | |", "|---|---|---|---|---|---|---|"]
         for c in o.checks:
