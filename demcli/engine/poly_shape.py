@@ -329,6 +329,21 @@ class PolyShape:
         return int(nl.act.sum()), int(np.count_nonzero(nl.wgeo[:, 0] > 0.0)) if len(nl.wgeo) else 0
 
     @staticmethod
+    def touching_pairs(s):
+        """(i, j) body indices of the pairs touching now."""
+        act = s.nl.act.astype(bool)
+        return np.asarray(s.nl.pi[act], np.int64), np.asarray(s.nl.pj[act], np.int64)
+
+    @staticmethod
+    def touching_walls(s):
+        """(body, wall) of the body-wall contacts touching now (a positive depth)."""
+        from demcli.kernels.shapes.polyhedra import G_DEPTH
+
+        nl = s.nl
+        wact = nl.wgeo[:, G_DEPTH] > 0.0 if len(nl.wgeo) else np.zeros(0, bool)
+        return np.asarray(nl.wprim[wact], np.int64), np.asarray(nl.wwall[wact], np.int64)
+
+    @staticmethod
     def late_groups(s):
         return {}
 

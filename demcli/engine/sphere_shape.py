@@ -201,19 +201,33 @@ class SphereShape:
 
     @staticmethod
     def contacts_per_sphere(s):
+        i, j = SphereShape.touching_pairs(s)
+        n = len(s.rad)
+        return np.bincount(i, minlength=n) + np.bincount(j, minlength=n)
+
+    @staticmethod
+    def touching_pairs(s):
+        """(i, j) sphere indices of the pairs touching now: touching contacts, then intact bonds
+        and seated pairs compressed beyond their delta_0 (a pair a bond replaces is no contact)."""
         nl = s.nl
         act = nl.act.astype(bool)
-        n = len(s.rad)
-        z = np.bincount(nl.pi[act], minlength=n) + np.bincount(nl.pj[act], minlength=n)
+        i, j = nl.pi[act], nl.pj[act]
         bd = s.bonds
         if len(bd):
             from demcli.kernels import bonds as B
 
-            i, j = bd.i, bd.j
-            delta = s.rad[i] + s.rad[j] - np.linalg.norm(s.xs[i] - s.xs[j], axis=1)
+            bi, bj = bd.i, bd.j
+            delta = s.rad[bi] + s.rad[bj] - np.linalg.norm(s.xs[bi] - s.xs[bj], axis=1)
             ok = (bd.state == B.INTACT) | (bd.seated() & (delta > bd.hist[:, B.H_D0]))
-            z = z + np.bincount(i[ok], minlength=n) + np.bincount(j[ok], minlength=n)
-        return z
+            i, j = np.concatenate([i, bi[ok]]), np.concatenate([j, bj[ok]])
+        return np.asarray(i, np.int64), np.asarray(j, np.int64)
+
+    @staticmethod
+    def touching_walls(s):
+        """(sphere, wall) of the sphere-wall contacts touching now."""
+        nl = s.nl
+        wact = np.any(nl.wfc[:, :3] != 0.0, axis=1) if len(nl.wfc) else np.zeros(0, bool)
+        return np.asarray(nl.wprim[wact], np.int64), np.asarray(nl.wwall[wact], np.int64)
 
     @staticmethod
     def bond_touching(s, gap, fraction, rng, stress_free):

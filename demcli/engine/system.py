@@ -361,6 +361,14 @@ class System:
         """(primitive-primitive contacts, primitive-wall contacts) touching at the last evaluation."""
         return self.plugin.contact_count(self)
 
+    def touching(self):
+        """((i, j), (k, wall)): the primitive pairs touching now (bonded spheres included: each
+        shape's ``touching_pairs``) and the primitive-wall pairs (``touching_walls``), as int64
+        arrays; ValueError for a shape that has none (a scene of spheres with polyhedra)."""
+        if not hasattr(self.plugin, "touching_pairs"):
+            raise ValueError(f"the touching pairs of a {self.plugin.name} scene are not listed yet")
+        return self.plugin.touching_pairs(self), self.plugin.touching_walls(self)
+
     # ---- snapshots ------------------------------------------------------------------
     _MUTABLE = ("x", "v", "w", "q", "L", "f", "tq", "wpoint", "wv", "wforce", "esph", "ebody", "eacc", "adamp", "nl",
                 "time", "step", "bond_state", "bond_hist", "wall_radius", "wall_params")

@@ -54,6 +54,13 @@ def _check_box(node, report):
             report(f"max.{d}", f"must be > min ({node.min[d]:g} m)", node.max[d])
 
 
+def _check_packing(node, report):
+    if node.window is not None and node.margin is not None:
+        report("margin", "give a window or a margin, not both", node.margin)
+    if node.window is not None and node.around is not None:
+        report("around", "is the box a margin shrinks; a window is taken as it is", node.around)
+
+
 _RIGID = Bool(default=False, doc="E* and G* from the particle alone (an infinitely stiff wall, as in rigid-body "
                                  "impact tests); the wall's material still gives friction and restitution; "
                                  "linear law: no effect (k_n, k_t are per pair)")
@@ -172,6 +179,22 @@ FIELDS = {
         }), doc="a per-contact record at every record row: overlap, normal and tangential force, contact point "
                 "and normal of each touching contact (sphere and clump scenes; records/contacts.csv, "
                 "demcli/stages/contact_record.py)"),
+        "packing": Optional(Section({
+            "window": Optional(Section({"min": Vector(3, "m"), "max": Vector(3, "m")}, check=_check_box),
+                               doc="the sampling window, an axis-aligned box (2D: its x-y rectangle)"),
+            "margin": Optional(Float(min=0), doc="without a window: the box of `around` shrunk by this many mean "
+                                                 "body diameters d on each side, at every record (default 2)"),
+            "around": Optional(Str(choices=["bodies", "walls"]),
+                               doc="the box a margin shrinks: bodies (default), the bodies' bounding box; walls, the "
+                                   "innermost axis-aligned plane walls (box faces) on each side, the bodies' extent "
+                                   "where there is none (an open top)"),
+            "min_contacts": Optional(Int(min=1), doc="a body with fewer contacts (bodies and walls) is a rattler, "
+                                                     "removed iteratively (default: 2 with friction, else "
+                                                     "dimension + 1)"),
+        }, check=_check_packing), doc="a packing record at every record row: solid fraction (2D: area fraction) "
+                                      "and coordination without rattlers in a sampling window away from the walls "
+                                      "(sphere, clump and polyhedron scenes; records/<stage>_packing.csv, "
+                                      "demcli/stages/packing_record.py)"),
         "checkpoint": Optional(Float("s", min=0, min_inclusive=False),
                                doc="also write a checkpoint at the first record after every this much wall-clock "
                                    "time (for runs longer than a job's time limit); `demcli run --resume` "
@@ -281,6 +304,8 @@ def scene_check(cfg, case, k, scene, report, shapes=None):
             report("bonds", msg)
         else:
             report("", f"{spec.declared_by} (effect {spec.name}) {msg}")
+    if cfg.get("output") is not None and cfg.output.get("packing") is not None and set(shapes) == {"mixed"}:
+        report("output.packing", "is for sphere, clump and polyhedron scenes, not yet for spheres with polyhedra")
     if set(shapes) <= {"polyhedra", "mixed"}:
         for k, w in enumerate(cfg.get("walls", ())):
             if w.type == "cylinder":

@@ -24,6 +24,7 @@ from demcli.progress import StopForecast
 from demcli.stages.dem import (build_walls, case_materials, contact_model, declared_effects, lay_walls, phase_models,
                                scene_shape, set_bond_models)
 from demcli.stages.contact_record import COLUMNS as CONTACT_COLUMNS, check_scene, contact_rows
+from demcli.stages.packing_record import COLUMNS as PACKING_COLUMNS, PackingProbe
 from demcli.stages.timing import stage_time_step, step_count
 from demcli.stepping import Stepper
 from demcli.state.fields import Field, register, register_group
@@ -228,6 +229,7 @@ def integrate(ctx, cfg, state_in, hooks=None):
     energy = plan.has("energy")
     table, wtable = _tables(ckpt, system, plan, hooks)
     ctable = _contact_table(ckpt, system, cfg.output.get("contacts"))
+    ptable = _packing_table(ckpt, cfg.output.get("packing"))
     ended = None if ckpt is None else ckpt.groups["checkpoint"].get("ended")  # the loop had ended: why
     ended = None if ended is None else str(ended)
     snaps = StageSnapshots(ctx.snapshot_dir, system.plugin.name, resume=ckpt is not None)
@@ -237,19 +239,24 @@ def integrate(ctx, cfg, state_in, hooks=None):
     d_mean = 2.0 * float(body_radii(system).mean())
     g = float(np.linalg.norm(system.gravity))
     e_unit = float(system.mass.mean()) * g * d_mean
+    probe = None if ptable is None else PackingProbe(system, cfg.output.packing, plan.has("planar"),
+                                                     float(ctx.case.get("thickness", 1.0)), d_mean, log=ctx.log,
+                                                     friction=plan.has("friction"))
 
     def record():
         row = _record(system, plan, hooks, table, wtable)
         if ctable is not None:
             for crow in contact_rows(system, cfg.output.contacts.bodies):
                 ctable.append(crow)
+        if probe is not None:
+            ptable.append(probe.row(system))
         return row
 
     def snapshot():
         snaps.write(ctx.state_from(system, plan, extra=None))
 
     def checkpoint(ended=None):
-        return _checkpoint(ctx, system, plan, (table, wtable, ctable), ended)
+        return _checkpoint(ctx, system, plan, (table, wtable, ctable, ptable), ended)
 
     stepper = Stepper(ctx, system)
     if ckpt is None:
@@ -320,7 +327,8 @@ def integrate(ctx, cfg, state_in, hooks=None):
             + (f"; stopped {stopped}" if stopped else ""))
     ctx.throughput = rate
     try:
-        return _outputs(ctx, system, plan, (table, wtable, ctable), hooks, snapshot if snap_every else None, energy)
+        return _outputs(ctx, system, plan, (table, wtable, ctable, ptable), hooks, snapshot if snap_every else None,
+                        energy)
     except KeyboardInterrupt:
         with interrupts.deferred(keep=False):
             path = checkpoint(ended=stopped or "")
@@ -391,6 +399,16 @@ def _contact_table(ckpt, system, spec):
     return RecordTable.from_state(ckpt, "contacts") if ckpt is not None else RecordTable("contacts", CONTACT_COLUMNS)
 
 
+def _packing_table(ckpt, spec):
+    """The ``packing`` record table of ``output.packing`` (a resumed stage's from its
+    checkpoint), or None without it."""
+    from demcli.state import RecordTable
+
+    if spec is None:
+        return None
+    return RecordTable.from_state(ckpt, "packing") if ckpt is not None else RecordTable("packing", PACKING_COLUMNS)
+
+
 def _record(system, plan, hooks, table, wtable):
     """One row into each table, now: the ``dem`` row (kinetic energy, contacts, coordination,
     the effects' and the hooks' columns) and the walls' positions and forces (docs/records.md
@@ -458,9 +476,9 @@ def _stop_forecast(cfg, hooks, dt, e_unit, nb):
 
 def _outputs(ctx, system, plan, tables, hooks, snapshot, energy):
     """The stage's outputs once its stepping has ended: the final snapshot, the state, the
-    record files (``tables``: dem, walls or None, contacts or None) and the stage's own
-    (``hooks.finish``)."""
-    table, wtable, ctable = tables
+    record files (``tables``: dem, walls or None, contacts or None, packing or None) and the
+    stage's own (``hooks.finish``)."""
+    table, wtable, ctable, ptable = tables
     if snapshot is not None:
         snapshot()
     st = ctx.state_from(system, plan, extra=None)
@@ -472,6 +490,10 @@ def _outputs(ctx, system, plan, tables, hooks, snapshot, energy):
     if ctable is not None:
         ctable.to_state(st)
         ctx.write_records(ctable, x="time", ys=["fn", "ft"], marker=".")
+    if ptable is not None:
+        ptable.to_state(st)
+        ctx.write_records(ptable, x="time", ys=["solid_fraction"])
+        ctx.write_records(ptable, x="time", ys=["coordination", "raw_coordination"], suffix="coordination")
     if energy:
         ctx.write_records(table, x="time", ys=["kinetic", "strain", "gravity", "damping", "friction",
                                                 "body_damping", "total"], suffix="energy")
