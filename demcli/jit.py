@@ -46,9 +46,20 @@ if _CACHE:
     numba.config.CACHE_DIR = cache_dir()
 
 
-def njit(*args, parallel=False, inline="never", **kwargs):
-    """``numba.njit`` with the project's cache policy; fastmath is never switched on."""
+INTERNAL = dict(no_cpython_wrapper=True, no_cfunc_wrapper=True)
+"""Options of a kernel called only by other kernels: numba builds no Python (or C) entry wrapper for
+it. The wrapper unboxes every argument from Python objects; for a kernel that takes tuples of
+arrays or tens of arrays it is a large share of its compile time (~0.3 s for Bodies + Contacts).
+Calling such a kernel from Python crashes the interpreter, so only kernels whose every caller is
+a kernel are marked (``internal=True``)."""
+
+
+def njit(*args, parallel=False, inline="never", internal=False, **kwargs):
+    """``numba.njit`` with the project's cache policy; fastmath is never switched on. ``internal``:
+    called only from other kernels (:data:`INTERNAL`)."""
     opts = dict(cache=_CACHE, parallel=parallel, nogil=True, error_model="numpy", inline=inline)
+    if internal:
+        opts.update(INTERNAL)
     opts.update(kwargs)
     if args and callable(args[0]):
         return numba.njit(**opts)(args[0])

@@ -489,7 +489,7 @@ def bond_forces(bonds, bprm, xs, vs, ws, rad, smat, smass, prm, law, dt, frictio
     bond_gather(brstart, brlist, bfc, btj, bed, frow, trow, erow, energy)
 
 
-@njit
+@njit(internal=True)
 def unbonded_pairs(bonds, bprm, start, pi, pj):
     """:func:`drop_bonded` with the bond state tuple; the list unchanged without bonds (None:
     compiled out, as in :func:`bond_forces`)."""

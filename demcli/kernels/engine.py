@@ -43,7 +43,7 @@ from demcli.kernels.shapes import pair_pass, place, primitives, spin_rotors, vol
 from demcli.kernels.switch import choose, on
 
 
-@njit
+@njit(internal=True)
 def mark_history(act, ft, mr, friction, rolling):
     """Flag carried pairs with history as active, so the pair pass clears it if they opened."""
     for c in range(act.shape[0]):
@@ -53,7 +53,7 @@ def mark_history(act, ft, mr, friction, rolling):
             act[c] = 1
 
 
-@njit
+@njit(internal=True)
 def rebuild_lists(g, bd, nl, par, flags, wa, bonds, bprm, vol, pair_torque):
     """New pair and wall lists on the shape's primitives (actors nsmall.. paired by
     :func:`add_actor_pairs`, bonded pairs left out), history carried over, fresh per-pair arrays
@@ -70,8 +70,9 @@ def rebuild_lists(g, bd, nl, par, flags, wa, bonds, bprm, vol, pair_torque):
         nstart, npi, npj = add_actor_pairs(nstart, npj, xs, rad, prim_body, nsmall, skin)
     else:
         nstart, npi, npj = build_pairs(xs, rad, prim_body, skin, par.max_cells)
-    if flags[F_BONDS]:
-        nstart, npi, npj = unbonded_pairs(bonds, bprm, nstart, npi, npj)
+    if bonds is not None:  # None (no bond code compiled) for polyhedra and mixed scenes
+        if flags[F_BONDS]:
+            nstart, npi, npj = unbonded_pairs(bonds, bprm, nstart, npi, npj)
     npair = npi.shape[0]
     nft = np.zeros((npair if friction else 0, 3))
     nmr = np.zeros((npair if rolling else 0, 3))
@@ -103,7 +104,7 @@ def rebuild_lists(g, bd, nl, par, flags, wa, bonds, bprm, vol, pair_torque):
                     wstart, wprim, wwall, wft, wmr, wfc, wtq, wen, wgeo, xs.copy(), nl.wref)
 
 
-@njit(parallel=True)
+@njit(parallel=True, internal=True)
 def gather(bd, L, fs, ts, own, nl, par, flags, sw, gs, dt, frow, trow, erow, esph, ebody, eabs, kevec, alpha,
            tload, fxref, lim2, rebuild):
     """Per primitive: its own row sums, the j sides of its pairs, its wall contacts; clump
@@ -211,15 +212,22 @@ def _member_rows(mb):
     return lambda mb: (mb.fs, mb.ts)
 
 
-@njit
 def finish_members(bd, mb, par, sw, dt, alpha, tload, ebody, eabs, kevec):
-    """:func:`member_loads` for clumps; without clumps (mb None) nothing, compiled out."""
-    if mb is None:
-        return
-    member_loads(bd, mb, par, sw, dt, alpha, tload, ebody, eabs, kevec)
+    """:func:`member_loads` for clumps; without clumps (mb None) nothing, decided at compile time
+    (plain Python: with NUMBA_DISABLE_JIT=1)."""
+    if mb is not None:
+        member_loads(bd, mb, par, sw, dt, alpha, tload, ebody, eabs, kevec)
 
 
-@njit(parallel=True)
+@overload(finish_members)
+def _finish_members(bd, mb, par, sw, dt, alpha, tload, ebody, eabs, kevec):
+    if isinstance(mb, types.NoneType):
+        return lambda bd, mb, par, sw, dt, alpha, tload, ebody, eabs, kevec: None
+    return lambda bd, mb, par, sw, dt, alpha, tload, ebody, eabs, kevec: member_loads(bd, mb, par, sw, dt, alpha,
+                                                                                      tload, ebody, eabs, kevec)
+
+
+@njit(parallel=True, internal=True)
 def member_loads(bd, mb, par, sw, dt, alpha, tload, ebody, eabs, kevec):
     """Clumps: each body sums its members' forces and torques (about its centre of mass, in
     member order), then finishes the step (motion.finish_body)."""
@@ -254,7 +262,7 @@ def member_loads(bd, mb, par, sw, dt, alpha, tload, ebody, eabs, kevec):
                       dt, h, cc, alpha, tload, True, ebody, eabs, kevec)
 
 
-@njit
+@njit(internal=True)
 def check(g, bd, L, nl, wa, par, info):
     """Guards: NaN/Inf in the body state, the shape's worst overlap ratio, runaway kinetic energy.
     L: the rotor switch (motion.rotors); info: (body or primitive i, j or -1 for a wall, worst
@@ -274,7 +282,7 @@ def check(g, bd, L, nl, wa, par, info):
     return OK
 
 
-@njit
+@njit(inline="always")
 def _count_effects(counters, flags, adaptive):
     """One increment per executed effect pass (the proof that an inactive effect ran nothing)."""
     if flags[F_FRICTION]:
@@ -364,7 +372,7 @@ def run_steps(nsteps, time, flags, prm, par, bd, g, mb, wa, nl, bonds, bprm, ada
             drifted = False
         else:
             M.kick_drift(bd.x, bd.v, bd.w, bd.q, Lr, bd.f, bd.tq, bd.mass, bd.inert, bd.flags, dt, alpha,
-                         rotate_body, clumps, static, nl.xref, lim2, rebuild, eabs)
+                         rotate_body, static, choose(mb, nl.xref, None), lim2, rebuild, eabs)
             counters[C_KICK] += 1
         place(g, bd, flags, nl.xref, lim2, rebuild)
         if clumps:

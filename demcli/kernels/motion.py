@@ -173,14 +173,15 @@ def damping_factors(alpha, h):
     return 1.0 - a, 1.0 / (1.0 + a)
 
 
-@njit(parallel=True)
-def kick_drift(x, v, w, q, L, f, tq, mass, inert, bflags, dt, alpha, rotate_body, members, static, xref, lim2,
+@njit(parallel=True, internal=True)
+def kick_drift(x, v, w, q, L, f, tq, mass, inert, bflags, dt, alpha, rotate_body, static, xref, lim2,
                rebuild, eabs):
     """First half kick, rotation (rigid rotors) and drift of every body; sets rebuild[0] when a
-    body that is its own collision primitive moved > skin/2 (clump members are checked when
-    placed); eabs[b]: the adaptive damping's absorbed energy of this half kick. L: None for spin
-    rotors (:func:`rotors`); static: the mask of the static switches (planar, adaptive), the
-    literal 0 when none is on."""
+    body that is its own collision primitive moved > skin/2; eabs[b]: the adaptive damping's
+    absorbed energy of this half kick. L: None for spin rotors (:func:`rotors`); static: the mask
+    of the static switches (planar, adaptive), the literal 0 when none is on; xref: the list's
+    reference positions, or None when clump members are the primitives (checked when placed):
+    either drift is compiled out of the other scenes."""
     h = 0.5 * dt
     c1p, c2p = damping_factors(alpha, h)
     for b in prange(x.shape[0]):
@@ -208,7 +209,7 @@ def kick_drift(x, v, w, q, L, f, tq, mass, inert, bflags, dt, alpha, rotate_body
             ea = et
             ea += 0.5 * (er0 + er1)
             eabs[b] = alpha * h * ea
-        if members:
+        if xref is None:
             x[b, 0] += v[b, 0] * dt
             x[b, 1] += v[b, 1] * dt
             x[b, 2] += v[b, 2] * dt
@@ -353,7 +354,7 @@ def kinetic_energy(b, v, w, L, m, ii):
         w[b, 0] ** 2 + w[b, 1] ** 2 + w[b, 2] ** 2)
 
 
-@njit
+@njit(internal=True)
 def adapt(adamp, eabs, kevec, energy, ebody):
     """Seed eq. 27: R = E_a / |Delta E_k|; R < 0.5: alpha *= 1.1, R > 0.5: alpha *= 0.99, kept in
     [A_MIN, A_MAX]. Sums in body order (serial): the decision does not depend on the thread count."""
@@ -388,7 +389,7 @@ def move_walls(wpoint, wref, wv, dt, lim2, rebuild):
             rebuild[0] = 1
 
 
-@njit
+@njit(internal=True)
 def move_radii(wctrl, wprm, wradius, wref, dt, lim2, rebuild):
     """Pressure-loaded cylinders change their radius by W_RATE dt; one whose radius moved
     more than skin/2 since the last list build flags a rebuild (wref[w, 0] holds that change)."""
@@ -400,7 +401,7 @@ def move_radii(wctrl, wprm, wradius, wref, dt, lim2, rebuild):
                 rebuild[0] = 1
 
 
-@njit
+@njit(internal=True)
 def wall_control(time, dt, nq, wwall, wfc, wnormal, wv, wctrl, wprm, wforce, wkn, eacc, energy):
     """Sum contact forces on each wall (fixed order), then set each wall's velocity.
 
@@ -454,7 +455,7 @@ def wall_control(time, dt, nq, wwall, wfc, wnormal, wv, wctrl, wprm, wforce, wkn
             wv[w, 2] = vn * nz
 
 
-@njit
+@njit(inline="always")
 def check_bodies(bd, L, info):
     """Guards on the body state: (finite, kinetic energy [J]); info[0] = the first bad body.
     L: the bodies' L, None for spin rotors (:func:`rotors`)."""

@@ -99,7 +99,7 @@ def _bin(xs, lo, inv_h, nc):
     return cnt, items
 
 
-@njit(parallel=True)
+@njit(parallel=True, internal=True)
 def _scan_pairs(xs, rad, body, skin, lo, inv_h, nc, cell_start, items, start, pj, fill):
     """Count (fill=False) or write (fill=True) the j > i neighbours of every sphere."""
     n = xs.shape[0]
@@ -184,7 +184,7 @@ def build_reverse(n, pj):
     return rstart, rlist
 
 
-@njit(parallel=True)
+@njit(parallel=True, internal=True)
 def carry_history(n, start_new, key_new, start_old, key_old, hist_old, hist_new):
     """Copy history rows of pairs present in both lists (rows sorted by key); zero others."""
     if hist_old.shape[0] == 0 and hist_new.shape[0] == 0:
@@ -204,7 +204,7 @@ def carry_history(n, start_new, key_new, start_old, key_old, hist_old, hist_new)
                     hist_new[c, d] = 0.0
 
 
-@njit(parallel=True)
+@njit(parallel=True, internal=True)
 def _scan_walls(xs, rad, skin, wkind, wpoint, wnormal, wradius, start, wall, fill):
     n = xs.shape[0]
     nw = wkind.shape[0]
@@ -222,7 +222,7 @@ def _scan_walls(xs, rad, skin, wkind, wpoint, wnormal, wradius, start, wall, fil
             start[i + 1] = k
 
 
-@njit
+@njit(internal=True)
 def build_wall_pairs(xs, rad, skin, wkind, wpoint, wnormal, wradius):
     """Sphere-wall list: (wstart (n+1,), wsphere (Q,), wwall (Q,)), sorted by sphere then wall."""
     n = xs.shape[0]

@@ -35,6 +35,8 @@ import inspect
 
 from numba.extending import overload
 
+from demcli.jit import INTERNAL
+
 from demcli.kernels.shapes import mixed, polyhedra, spheres
 
 SHAPES = {}
@@ -105,7 +107,7 @@ def _implement(name, inline="never"):
         return _hook(args[0], name).py_func
 
     typer.__signature__ = inspect.signature(entry)
-    overload(entry, inline=inline)(typer)
+    overload(entry, inline=inline, jit_options=dict(INTERNAL))(typer)  # called by the engine only
 
 
 for _name in ("place", "primitives", "pair_pass", "wall_pass", "worst_overlap", "spin_rotors"):

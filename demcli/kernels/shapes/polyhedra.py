@@ -70,7 +70,7 @@ G_DEPTH, G_FN, G_KT = 0, 1, 2
 
 
 
-@njit
+@njit(internal=True)
 def _volumetric_law(prm, ma, mb, vol, depth, area, nx, ny, nz, vx, vy, vz, mstar, dt, ft, k, friction, dashpot):
     """Force on A of one contact (seed eqs. 17-19; see the module docstring).
 
@@ -132,7 +132,7 @@ def _volumetric_law(prm, ma, mb, vol, depth, area, nx, ny, nz, vx, vy, vz, mstar
     return fx, fy, fz, e_damp, e_fric, fel, kserv, kt
 
 
-@njit(parallel=True)
+@njit(parallel=True, internal=True)
 def _world_geometry(x, q, shape, vertex_start, vertices, face_start, face_normal, face_offset,
                     bvstart, bfstart, wvert, wnorm, woff):
     """World vertices and face planes of every body (rows bvstart / bfstart)."""
@@ -185,7 +185,7 @@ def _still_separated(code, na, da, va, nb_, db_, vb, margin):
     return True
 
 
-@njit(parallel=True)
+@njit(parallel=True, internal=True)
 def _pair_forces(start, pj, x, v, w, mass, rad, bmat, prm, sw, dt,
                  shape, vertex_start, face_start, fvstart, fverts, bvstart, bfstart, wvert, wnorm, woff,
                  ft, fc, tj, act, epair, geo, frow, trow, erow, sep, sdir, r0):
@@ -391,7 +391,7 @@ def wall_pass(g, bd, nl, wa, prm, law, flags, dt):
                  nl.wfc, nl.wtq, nl.wen, nl.wgeo, 0)
 
 
-@njit(parallel=True)
+@njit(parallel=True, internal=True)
 def _wall_forces(wstart, wwall, x, v, w, mass, rad, bmat, shape, vertex_start, face_start, fvstart, fverts, bvstart,
                  bfstart, wvert, wnorm, woff, wkind, wpoint, wnormal, wv, wmat, prm, dt, friction, dashpot, energy,
                  wft, wfc, wtq, wen, wgeo, r0):

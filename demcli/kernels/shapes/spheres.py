@@ -52,7 +52,7 @@ def _place_members(x, v, w, q, xs, vs, ws, sbody, soff, xref, lim2, rebuild):
             rebuild[0] = 1
 
 
-@njit(parallel=True)
+@njit(parallel=True, internal=True)
 def _pair_forces(start, pj, xs, vs, ws, rad, smat, smass, prm, law, dt, ft, mr, friction, rolling,
                  energy, fc, tj, act, epair, frow, trow, erow, split):
     """Force, torques and dissipation of every listed pair, each pair writing its own row.
@@ -250,7 +250,7 @@ def wall_pass(g, bd, nl, wa, prm, law, flags, dt):
                  flags[F_ENERGY], nl.wfc, nl.wtq, nl.wen, None)
 
 
-@njit(parallel=True)
+@njit(parallel=True, internal=True)
 def _wall_forces(wprim, wwall, xs, vs, ws, rad, smat, smass, wkind, wpoint, wnormal, wradius, wv, wmat, prm, law,
                  dt, wft, wmr, friction, rolling, energy, wfc, wtq, wen, split):
     """Every sphere-wall contact k (prange over contacts: each writes its own rows); ``split``
