@@ -177,7 +177,7 @@ FIELDS = {
             "bodies": List(Int(min=0), default=(), doc="body ids whose contacts are recorded (default: every "
                                                        "contact, scenes of up to 2000 spheres)"),
         }), doc="a per-contact record at every record row: overlap, normal and tangential force, contact point "
-                "and normal of each touching contact (sphere and clump scenes; records/contacts.csv, "
+                "and normal of each touching contact (sphere, clump and polyhedron scenes; records/contacts.csv, "
                 "demcli/stages/contact_record.py)"),
         "packing": Optional(Section({
             "window": Optional(Section({"min": Vector(3, "m"), "max": Vector(3, "m")}, check=_check_box),

@@ -123,6 +123,38 @@ def test_cube_on_a_cube_carries_its_weight():
     assert max(down_face_tilt(s, 0), down_face_tilt(s, 1)) < 1e-4
 
 
+def test_contact_record_of_stacked_cubes_gives_their_weights_at_the_faces():
+    # Given: the stacked cubes of the test above, settled (0.3 s)
+    from demcli.stages.contact_record import contact_rows
+
+    a = 0.02
+    turn = Rotation.from_rotvec([0.0, 0.0, math.radians(30.0)]).as_quat()
+    s = system([box(a, a, a), box(a, a, a)], x=[[0.0, 0.0, a / 2 + 5e-5], [a / 4, 0.0, 1.5 * a + 1e-4]],
+               q=[[1.0, 0, 0, 0], np.r_[turn[3], turn[:3]]], effects=["gravity", "friction", "local_damping"],
+               walls=planes([0, 0, 0], [0, 0, 1]), local_damping=0.4)
+    m0, m1 = s.mass
+    assert s.advance(int(0.3 / s.dt))[0] == K.OK
+    # When: the per-contact record is taken (output.contacts)
+    pair, wall = contact_rows(s)
+    # Then: the pair row carries the top cube's weight on the bottom one (normal from the top one
+    # down, fn = m1 g within 0.1 %), its point lies in the thin overlap at the bottom cube's top
+    # face (within 5e-6 a: the cubes tilt by ~4e-6 rad) inside both footprints, its overlap is the
+    # law's depth (> 0, < 1e-3 a)
+    assert (pair["i"], pair["j"]) == (0, 1)
+    assert (pair["nx"], pair["ny"], pair["nz"]) == pytest.approx((0.0, 0.0, -1.0), abs=1e-4)
+    assert pair["fn"] == pytest.approx(m1 * G, rel=1e-3) and pair["ft"] < 1e-3 * m1 * G
+    assert 0.0 < pair["overlap"] < 1e-3 * a and abs(pair["cz"] - s.x[0, 2] - a / 2) <= 5e-6 * a
+    # and, the law acting at the overlap's centroid, the moments balance: the point lies under the
+    # top cube's centre of mass (1e-3 a)
+    assert (pair["cx"], pair["cy"]) == pytest.approx((s.x[1, 0], s.x[1, 1]), abs=1e-3 * a)
+    # and the floor row carries both weights, up (wall 0 is j = -1), at the floor, under the two
+    # cubes' common centre of mass (a/8 from the bottom one's axis)
+    com = (m0 * s.x[0] + m1 * s.x[1]) / (m0 + m1)
+    assert wall["j"] == -1 and (wall["nx"], wall["ny"], wall["nz"]) == pytest.approx((0.0, 0.0, 1.0), abs=1e-4)
+    assert wall["fn"] == pytest.approx((m0 + m1) * G, rel=1e-3) and abs(wall["cz"]) <= 5e-6 * a
+    assert (wall["cx"], wall["cy"]) == pytest.approx((com[0], com[1]), abs=1e-3 * a)
+
+
 # ---------------------------------------------------------------------------------------------
 # Friction: a block on an incline (gravity tilted)
 # ---------------------------------------------------------------------------------------------

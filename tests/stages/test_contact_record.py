@@ -69,10 +69,12 @@ def test_contact_record_follows_hertz_for_a_wall_and_a_pair(tmp_path):
     assert "records/contacts" in last.groups
 
 
-def test_polyhedra_and_large_unnamed_scenes_are_refused():
+def test_mixed_and_large_unnamed_scenes_are_refused():
     spec = SimpleNamespace(bodies=())
-    with pytest.raises(InputError, match="sphere and clump scenes"):
-        check_scene(SimpleNamespace(plugin=SimpleNamespace(name="polyhedra"), rad=np.zeros(3)), spec)
+    with pytest.raises(InputError, match="sphere, clump and polyhedron scenes"):
+        check_scene(SimpleNamespace(plugin=SimpleNamespace(name="mixed"), rad=np.zeros(3)), spec)
+    with pytest.raises(InputError, match="5000 polyhedra"):
+        check_scene(SimpleNamespace(plugin=SimpleNamespace(name="polyhedra"), rad=np.zeros(5000)), spec)
     with pytest.raises(InputError, match="name the bodies"):
         check_scene(SimpleNamespace(plugin=SimpleNamespace(name="spheres"), rad=np.zeros(5000)), spec)
     check_scene(SimpleNamespace(plugin=SimpleNamespace(name="spheres"), rad=np.zeros(5000)),
