@@ -100,14 +100,18 @@ def test_cube_resting_on_a_plane_carries_its_weight():
     assert s.contact_count() == (0, 1)
 
 
-def test_cube_on_a_cube_carries_its_weight():
-    # Given: two 20 mm cubes stacked on a plane floor, the top one shifted by a/4 in x and turned
-    # 30 degrees about z (an octagonal face-face patch), 0.05 mm gaps; gravity, friction, local damping
-    a = 0.02
+def stacked_cubes(a=0.02):
+    """Two a-sized cubes stacked on a plane floor, the top one shifted by a/4 in x and turned 30
+    degrees about z (an octagonal face-face patch), 0.05 mm gaps; gravity, friction, local damping."""
     turn = Rotation.from_rotvec([0.0, 0.0, math.radians(30.0)]).as_quat()
-    s = system([box(a, a, a), box(a, a, a)], x=[[0.0, 0.0, a / 2 + 5e-5], [a / 4, 0.0, 1.5 * a + 1e-4]],
-               q=[[1.0, 0, 0, 0], np.r_[turn[3], turn[:3]]], effects=["gravity", "friction", "local_damping"],
-               walls=planes([0, 0, 0], [0, 0, 1]), local_damping=0.4)
+    return system([box(a, a, a), box(a, a, a)], x=[[0.0, 0.0, a / 2 + 5e-5], [a / 4, 0.0, 1.5 * a + 1e-4]],
+                  q=[[1.0, 0, 0, 0], np.r_[turn[3], turn[:3]]], effects=["gravity", "friction", "local_damping"],
+                  walls=planes([0, 0, 0], [0, 0, 1]), local_damping=0.4)
+
+
+def test_cube_on_a_cube_carries_its_weight():
+    # Given: two 20 mm cubes stacked (stacked_cubes)
+    s = stacked_cubes()
     m0, m1 = s.mass
     # When: 0.3 s
     status, _ = s.advance(int(0.3 / s.dt))
@@ -128,10 +132,7 @@ def test_contact_record_of_stacked_cubes_gives_their_weights_at_the_faces():
     from demcli.stages.contact_record import contact_rows
 
     a = 0.02
-    turn = Rotation.from_rotvec([0.0, 0.0, math.radians(30.0)]).as_quat()
-    s = system([box(a, a, a), box(a, a, a)], x=[[0.0, 0.0, a / 2 + 5e-5], [a / 4, 0.0, 1.5 * a + 1e-4]],
-               q=[[1.0, 0, 0, 0], np.r_[turn[3], turn[:3]]], effects=["gravity", "friction", "local_damping"],
-               walls=planes([0, 0, 0], [0, 0, 1]), local_damping=0.4)
+    s = stacked_cubes(a)
     m0, m1 = s.mass
     assert s.advance(int(0.3 / s.dt))[0] == K.OK
     # When: the per-contact record is taken (output.contacts)
