@@ -141,7 +141,7 @@ class MixedShape:
         shapes do: history for carry-over, forces, depths and touching flags."""
         n = len(s.rad)
         cols = {"ft": (3, s.flags[K.F_FRICTION]), "mr": (3, s.flags[K.F_ROLLING]), "force": (3, True),
-                "depth": (0, True)}
+                "depth": (0, True), "box": (6, True)}
         pairs = _by_primitive(s, groups, (("contacts", "i", "j", 0, 0),
                                           ("sphere_body_contacts", "sphere", "body", 0, 1),
                                           ("body_contacts", "i", "j", 1, 1)))
@@ -213,6 +213,7 @@ class MixedShape:
         for name, m, (ka, a), (kb, b), depth, mr in kinds:
             out[name] = _contact_rows(m, ka, a, kb, b, nl.fc, nl.geo[:, G_DEPTH] if depth else None,
                                       nl.ft if friction else None, nl.mr if mr else None)
+        out["body_contacts"]["box"] = nl.pbox[act & (pi >= ns)].copy()
         wsph = wact & (wp < ns)
         wpol = wact & (wp >= ns)
         out["wall_contacts"] = _contact_rows(wsph, "sphere", wp, "wall", nl.wwall, nl.wfc[:, :3], None,
@@ -236,14 +237,14 @@ def _by_primitive(s, groups, kinds):
     kinds: (group, key a, key b, a is a body, b is a body (None: a wall index))."""
     prim_of_body = np.full(len(s.mass), -1, np.int64)
     prim_of_body[s.nbs:] = np.arange(s.ns, len(s.rad))
-    parts = {"a": [], "b": [], "force": [], "depth": [], "ft": [], "mr": []}
+    parts = {"a": [], "b": [], "force": [], "depth": [], "ft": [], "mr": [], "box": []}
     for name, ka, kb, a_body, b_body in kinds:
         g = groups.get(name, {})
         a = np.asarray(g.get(ka, np.zeros(0, np.int64)), np.int64)
         b = np.asarray(g.get(kb, np.zeros(0, np.int64)), np.int64)
         parts["a"].append(prim_of_body[a] if a_body else a)
         parts["b"].append(b if b_body is None else prim_of_body[b] if b_body else b)
-        for key, cols in (("force", 3), ("depth", 0), ("ft", 3), ("mr", 3)):
+        for key, cols in (("force", 3), ("depth", 0), ("ft", 3), ("mr", 3), ("box", 6)):
             shape = (len(a), cols) if cols else (len(a),)
             parts[key].append(np.asarray(g[key], np.float64).reshape(shape) if key in g else np.zeros(shape))
     return {k: np.concatenate(v) for k, v in parts.items()}

@@ -251,7 +251,8 @@ class PolyShape:
         state written before contacts kept their depth seeds depth 0 (such a contact counts
         again once the resumed stage has stepped)."""
         nb = len(s.mass)
-        cols = {"ft": (3, s.flags[K.F_FRICTION]), "mr": (3, False), "force": (3, True), "depth": (0, True)}
+        cols = {"ft": (3, s.flags[K.F_FRICTION]), "mr": (3, False), "force": (3, True), "depth": (0, True),
+                "box": (6, True)}
         start, ci, cj, rows = stored_contacts(groups.get("body_contacts", {}), "i", "j", nb, cols)
         wstart, wb, ww, wrows = stored_contacts(groups.get("body_wall_contacts", {}), "body", "wall", nb, cols,
                                                 len(s.walls))
@@ -357,7 +358,7 @@ class PolyShape:
         nl = s.nl
         act = nl.act.astype(bool)
         contacts = {"i": nl.pi[act].copy(), "j": nl.pj[act].copy(), "force": nl.fc[act].copy(),
-                    "depth": nl.geo[act, G_DEPTH].copy()}
+                    "depth": nl.geo[act, G_DEPTH].copy(), "box": nl.pbox[act].copy()}
         if s.flags[K.F_FRICTION]:
             contacts["ft"] = nl.ft[act].copy()
         wgeo = nl.wgeo

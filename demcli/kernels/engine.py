@@ -78,6 +78,8 @@ def rebuild_lists(g, bd, nl, par, flags, wa, bonds, bprm, vol, pair_torque):
     nmr = np.zeros((npair if rolling else 0, 3))
     carry_history(ns, nstart, npj, nl.start, nl.pj, nl.ft, nft)
     carry_history(ns, nstart, npj, nl.start, nl.pj, nl.mr, nmr)
+    npbox = np.zeros((npair if vol else 0, 6))
+    carry_history(ns, nstart, npj, nl.start, nl.pj, nl.pbox, npbox)
     rstart, rlist = build_reverse(ns, npj)
     act = np.zeros(npair, np.uint8)
     if not vol:
@@ -100,7 +102,7 @@ def rebuild_lists(g, bd, nl, par, flags, wa, bonds, bprm, vol, pair_torque):
     return Contacts(nstart, npi, npj, rstart, rlist, nft, nmr, np.empty((npair, 3)),  # fc: read where act only
                     np.zeros((npair if pair_torque else 0, 3)), act,
                     np.zeros((npair if flags[F_ENERGY] else 0, 2)), np.zeros((npair if vol else 0, 3)),
-                    np.zeros(npair if vol else 0, np.int32), np.zeros((npair if vol else 0, 3)),
+                    np.zeros(npair if vol else 0, np.int32), np.zeros((npair if vol else 0, 3)), npbox,
                     wstart, wprim, wwall, wft, wmr, wfc, wtq, wen, wgeo, xs.copy(), nl.wref)
 
 

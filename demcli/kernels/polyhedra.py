@@ -119,6 +119,16 @@ miss it are skipped. The remaining planes are sorted to face the other body firs
 so a face outside it is dropped after one or two plane tests; a plane that leaves a
 (partly clipped) face wholly inside costs one pass over its vertices.
 
+Temporal coherence (:func:`overlap_in_box`): between two steps a contact's intersection moves
+by ~1e-6 of a stone, while the bodies' common bounding box holds most of both bodies (on the
+loaded quickstart bed 16-17 faces meet it, 3.5 per body cut the intersection's own box). The
+engine keeps each touching pair's intersection box and culls the next evaluation by it, widened
+by BOX_PAD = 1e-2 min(r_A, r_B): no extents, and a handful of planes and faces. The result
+shows whether the box held the whole intersection (every piece strictly inside it, see
+there); if not (or nothing is left in it) the pair is evaluated again in full. Measured on
+that bed's 244 touching pairs one step on: no fallback, results equal to the full overlap to
+2e-15 relative, 1.7 against 4.3 us per pair (bench/README.md).
+
 Reference counting: numba updates an atomic reference count whenever an array is
 rebound or passed to an inlined helper; in the clipping loop that cost more than
 the geometry, so the clipping and cone sums are written out in
@@ -151,6 +161,9 @@ PARALLEL_COS = 0.99
 # S: a boundary piece of I within BAND_REL min(r_A, r_B) of a same-facing face of the other
 # body counts in proportion to its distance from it (see _band_deficit)
 BAND_REL = 1e-3
+# overlap_in_box: a touching pair's culling box is its last intersection's bounding box widened by
+# BOX_PAD min(r_A, r_B) on each side (a fallback to the full overlap when I reaches out of it)
+BOX_PAD = 1e-2
 # contact_frame: S is blended with the unit centroid difference where |S| is below
 # about AREA_BLEND r_A r_B (round-off level: one body inside the other)
 AREA_BLEND = 1e-10
@@ -703,7 +716,6 @@ def overlap_ws(va, fsa, fva, offa, na, da, cax, cay, caz, ra,
     reach = ra + rb + tol
     if ux * ux + uy * uy + uz * uz > reach * reach:
         return 0.0, mx_, my_, mz_, 0.0, 0.0, 0.0
-    cap = buf.shape[0] // 2
     # fw: box (0-5), the two bodies' boxes (6-17), sums (18-35), distances (36-)
     # ranges along the centre line: a separating axis test on c_B - c_A
     ulo_a, uhi_a = _extents(va, fw, 6, ux, uy, uz)
@@ -718,16 +730,28 @@ def overlap_ws(va, fsa, fva, offa, na, da, cax, cay, caz, ra,
             return 0.0, mx_, my_, mz_, 0.0, 0.0, 0.0
         fw[k] = lo
         fw[3 + k] = hi
+    if not _clip_in_box(va, fsa, fva, offa, na, da, vb, fsb, fvb, offb, nb, db, ux, uy, uz, tol,
+                        BAND_REL * min(ra, rb), buf, fw, planes):
+        return 0.0, mx_, my_, mz_, 0.0, 0.0, 0.0
+    return _finish(fw, 18, mx_, my_, mz_)
+
+
+@njit(internal=True)
+def _clip_in_box(va, fsa, fva, offa, na, da, vb, fsb, fvb, offb, nb, db, ux, uy, uz, tol, band, buf, fw, planes):
+    """The boundary pieces of A n B that the culling box fw[0:6] holds, summed into fw[18:36]
+    (:func:`_faces_inside`): the planes of A and of B that cut the box (sorted by their normals'
+    projection on u = c_B - c_A, see :func:`_planes_in_box`), then the faces of A clipped by B's and
+    those of B by A's. Returns False (nothing summed) when the box lies outside a plane of A or B."""
+    cap = buf.shape[0] // 2
     # planes: A's cutting planes from 0, B's after them; A's near planes from the end
     # down, B's below them (see _planes_in_box)
-    band = BAND_REL * min(ra, rb)
     qa = planes.shape[0] - 1
     nca, nna = _planes_in_box(na, da, fw, ux, uy, uz, tol, band, -1.0, planes, 0, qa)
     if nca < 0:
-        return 0.0, mx_, my_, mz_, 0.0, 0.0, 0.0
+        return False
     ncb, nnb = _planes_in_box(nb, db, fw, ux, uy, uz, tol, band, 1.0, planes, nca, qa - nna)
     if ncb < 0:
-        return 0.0, mx_, my_, mz_, 0.0, 0.0, 0.0
+        return False
     for k in range(18, 36):
         fw[k] = 0.0
     for c in range(3):
@@ -740,7 +764,44 @@ def overlap_ws(va, fsa, fva, offa, na, da, cax, cay, caz, ra,
                   band, np.bool_(True), buf, cap, fw)
     _faces_inside(vb, fsb, fvb, offb, nb, db, planes, nca, ncb, na, da, zero, nca, qa, np.int64(nna), tol,
                   band, np.bool_(False), buf, cap, fw)
-    return _finish(fw, 18, mx_, my_, mz_)
+    return True
+
+
+@njit
+def overlap_in_box(va, fsa, fva, offa, na, da, cax, cay, caz, ra,
+                   vb, fsb, fvb, offb, nb, db, cbx, cby, cbz, rb, box, buf, fw, planes):
+    """:func:`overlap_ws` culled by a given box instead of the bodies' bounding boxes (temporal
+    coherence: a touching pair's last intersection, widened, see :data:`BOX_PAD`).
+
+    box (6,) float64, m: low xyz, high xyz. Returns (ok, V, gx, gy, gz, sx, sy, sz). With ok
+    True the result is exactly what :func:`overlap_ws` computes, up to round-off (the same
+    pieces, clipped by fewer planes); ok False: I may reach out of the box (or is empty) and
+    nothing is returned: evaluate with :func:`overlap_ws`.
+
+    Why the check below makes it exact. Planes that leave the box inside by more than tau
+    are skipped, faces whose bounding box misses it are skipped, the others are clipped by
+    the planes that cut it. A computed piece then contains the true piece of its face (it was
+    clipped by fewer planes), and one that lies inside the box by more than tau is the true
+    piece (a skipped plane holds the whole box). If I reached out of the box, its boundary
+    would cross the box's at some point p, on the true piece of a face whose polygon therefore
+    meets the box: that face's computed piece holds p, on the box's boundary. So when every
+    piece lies inside the box by more than tau, no piece is missing and each is exact.
+    """
+    mx_ = 0.5 * (cax + cbx)
+    my_ = 0.5 * (cay + cby)
+    mz_ = 0.5 * (caz + cbz)
+    big = max(abs(cax), abs(cay), abs(caz), abs(cbx), abs(cby), abs(cbz))
+    tol = TOL_REL * min(ra, rb) + TOL_COORD * (big + max(ra, rb))
+    for k in range(6):
+        fw[k] = box[k]
+    if not _clip_in_box(va, fsa, fva, offa, na, da, vb, fsb, fvb, offb, nb, db, cbx - cax, cby - cay, cbz - caz,
+                        tol, BAND_REL * min(ra, rb), buf, fw, planes) or fw[35] == 0.0:
+        return False, 0.0, mx_, my_, mz_, 0.0, 0.0, 0.0
+    for k in range(3):  # the pieces' box (fw[22:28]) strictly inside the culling box
+        if fw[22 + k] <= box[k] + tol or fw[25 + k] >= box[3 + k] - tol:
+            return False, 0.0, mx_, my_, mz_, 0.0, 0.0, 0.0
+    vol, gx, gy, gz, sx, sy, sz = _finish(fw, 18, mx_, my_, mz_)
+    return True, vol, gx, gy, gz, sx, sy, sz
 
 
 @njit

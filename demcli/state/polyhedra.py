@@ -77,6 +77,9 @@ for _name, _kind, _dims, _unit, _doc, _kw in [
         ("ft", "f", ("n_bc", 3), "N", "tangential spring force (history)", {"required": False, "finite": True}),
         ("force", "f", ("n_bc", 3), "N", "last contact force on body i", {"finite": True}),
         ("depth", "f", ("n_bc",), "m", "overlap depth d = V / A_c of the last evaluation",
+         {"required": False, "finite": True}),
+        ("box", "f", ("n_bc", 6), "m", "bounding box of the intersection at the last evaluation (low xyz, high "
+         "xyz): the next step's culling box (temporal coherence: the result is the same with or without it, up to round-off)",
          {"required": False, "finite": True})]:
     register(Field(f"body_contacts/{_name}", _kind, _dims, _unit, _doc, writer="engine (polyhedra)", **_kw))
 

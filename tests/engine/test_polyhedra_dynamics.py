@@ -523,3 +523,27 @@ def test_separation_cache_changes_nothing():
     assert faces > 0 and directions > 0
     for name in ("x", "v", "q", "L", "f", "tq"):
         np.testing.assert_array_equal(getattr(a, name), getattr(b, name), err_msg=name)
+
+
+def test_culling_box_cache_changes_only_round_off():
+    # Given: the heap after 7750 steps (two touching pairs, each with the bounding box of its last
+    # intersection: the next step's culling box)
+    eff = ["gravity", "friction", "local_damping"]
+    a = _heap(effects=eff, local_damping=0.2, contact_damping=True)
+    a.advance(7750)
+    snap = a.snapshot()
+    boxed = np.count_nonzero(a.nl.pbox[:, 3] > a.nl.pbox[:, 0])
+    assert boxed == a.contact_count()[0] > 0
+    # When: one step with the cached boxes, and the same step from the same state with the cache
+    # wiped (every touching pair clipped in the bodies' common bounding box)
+    a.advance(1)
+    with_box = {k: getattr(a, k).copy() for k in ("f", "tq", "v")}
+    fc = a.nl.fc[a.nl.act.astype(bool)].copy()
+    a.restore(snap)
+    a.nl.pbox[:] = 0.0
+    a.advance(1)
+    # Then: the same contacts and loads to 1e-12 of the largest (round-off: the same pieces of the
+    # intersection, clipped by fewer planes)
+    np.testing.assert_allclose(a.nl.fc[a.nl.act.astype(bool)], fc, rtol=0, atol=1e-12 * np.abs(fc).max())
+    for k, val in with_box.items():
+        np.testing.assert_allclose(getattr(a, k), val, rtol=0, atol=1e-12 * np.abs(val).max(), err_msg=k)

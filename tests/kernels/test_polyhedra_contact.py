@@ -10,8 +10,8 @@ from scipy.optimize import linprog
 from scipy.spatial import ConvexHull, HalfspaceIntersection
 
 from demcli.geometry import convex_hull, random_polyhedron
-from demcli.kernels.polyhedra import (contact_frame, overlap, overlap_ws, place, polyhedron_overlap,
-                                     polyhedron_plane_overlap, scratch)
+from demcli.kernels.polyhedra import (BOX_PAD, contact_frame, overlap, overlap_in_box, overlap_ws, place,
+                                     polyhedron_overlap, polyhedron_plane_overlap, scratch)
 
 CUBE = convex_hull(np.array(list(itertools.product([-0.5, 0.5], repeat=3))))
 
@@ -248,6 +248,97 @@ def test_shared_scratch_gives_the_same_result_as_fresh_scratch():
         # Then it is bit-identical to a call with scratch of its own size
         assert got == overlap(*a.args(), *b.args())
         assert got[0] > 0.0
+
+
+# ----------------------------------------------------------------------------- coherent culling
+
+
+def full_with_box(a, b):
+    """overlap_ws of the pair and the bounding box of its intersection's pieces (fw[22:28])."""
+    buf, fw, planes = scratch(int(max(np.diff(a.face_start).max(), np.diff(b.face_start).max())),
+                              max(len(a.normals), len(b.normals)))
+    r = overlap_ws(*a.args(), *b.args(), buf, fw, planes)
+    return r, fw[22:28].copy(), (buf, fw, planes)
+
+
+def moved(p, placed, q, rng, dist, angle):
+    """p, placed with rotation q, moved by ``dist`` along a random direction and turned by
+    ``angle`` rad about a random axis through its centre."""
+    d = rng.normal(size=3)
+    q2 = qmul(quat(rng.normal(size=3), math.degrees(angle)), q)
+    c = placed.center + dist * d / np.linalg.norm(d)
+    return place(p, c - rotmat(q2) @ p.centroid, q2)
+
+
+def assert_same_contact(got, ref, size):
+    v, g, s = got[0], np.array(got[1:4]), np.array(got[4:7])
+    assert v == pytest.approx(ref[0], rel=1e-12, abs=0)
+    assert np.abs(g - np.array(ref[1:4])).max() < 1e-12 * size
+    assert np.abs(s - np.array(ref[4:7])).max() < 1e-12 * np.linalg.norm(ref[4:7])
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_overlap_in_box_after_a_small_move_matches_the_full_overlap(seed):
+    # Given a random pair overlapping by 1e-4 .. 0.1 of the smaller volume and the bounding box
+    # of its intersection, as the pair pass keeps it per touching pair
+    rng = np.random.default_rng(500 + seed)
+    pa, pb, a, b, qa, qb = random_pair(rng, 10.0 ** rng.uniform(-4, -1))
+    _, pbox, ws = full_with_box(a, b)
+    # When B moves by 1e-4 of its size and turns by 1e-4 rad (a few DEM steps) and the pair is
+    # evaluated in that box widened by BOX_PAD of the smaller bounding radius
+    b2 = moved(pb, b, qb, rng, 1e-4, 1e-4)
+    pad = BOX_PAD * min(a.radius, b2.radius)
+    got = overlap_in_box(*a.args(), *b2.args(), pbox + np.r_[-pad, -pad, -pad, pad, pad, pad], *ws)
+    # Then the box holds the new intersection and the result is the full overlap's to 1e-12
+    # (relative; round-off: the same pieces, clipped by fewer planes)
+    ref = overlap(*a.args(), *b2.args())
+    assert got[0] and ref[0] > 0.0
+    assert_same_contact(got[1:], ref, 2 * max(a.radius, b2.radius))
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_overlap_in_box_never_returns_a_wrong_result(seed):
+    # Given random pairs and culling boxes drawn around their intersection: shrunk, shifted,
+    # grown, far away, flat
+    rng = np.random.default_rng(600 + seed)
+    accepted = refused = 0
+    for _ in range(12):
+        pa, pb, a, b, qa, qb = random_pair(rng, 10.0 ** rng.uniform(-4, -1))
+        ref, pbox, ws = full_with_box(a, b)
+        lo, hi = pbox[:3], pbox[3:]
+        size = hi - lo
+        for _ in range(20):
+            c = 0.5 * (lo + hi) + rng.uniform(-0.6, 0.6, 3) * size * rng.choice([0.0, 0.3, 10.0])
+            half = 0.5 * size * rng.uniform(0.5, 2.5, 3)
+            # When the pair is evaluated in such a box
+            got = overlap_in_box(*a.args(), *b.args(), np.r_[c - half, c + half], *ws)
+            # Then it either refuses (the intersection may reach out of the box) or gives the
+            # full overlap's result to 1e-12
+            if got[0]:
+                accepted += 1
+                assert_same_contact(got[1:], ref, 2 * max(a.radius, b.radius))
+                assert np.all(c - half < lo) and np.all(c + half > hi)
+            else:
+                refused += 1
+    # and both outcomes occur (the draws test something)
+    assert accepted > 20 and refused > 20
+
+
+def test_overlap_in_box_refuses_an_empty_box_and_separated_bodies():
+    # Given two unit cubes overlapping by 0.1 along x
+    a, b = place(CUBE, (0.0, 0.0, 0.0)), place(CUBE, (0.9, 0.0, 0.0))
+    ref, pbox, ws = full_with_box(a, b)
+    assert ref[0] == pytest.approx(0.1, rel=1e-12)
+    np.testing.assert_allclose(pbox, [0.4, -0.5, -0.5, 0.5, 0.5, 0.5], atol=1e-12)
+    # When the box lies beside the intersection, or the bodies have parted since the box was
+    # taken, then the evaluation is refused (the caller falls back to the full overlap)
+    assert not overlap_in_box(*a.args(), *b.args(), np.r_[2.0, 2.0, 2.0, 3.0, 3.0, 3.0], *ws)[0]
+    apart = place(CUBE, (1.2, 0.0, 0.0))
+    assert not overlap_in_box(*a.args(), *apart.args(), pbox + np.r_[-0.01, -0.01, -0.01, 0.01, 0.01, 0.01],
+                              *ws)[0]
+    # and a box around it gives the exact overlap
+    got = overlap_in_box(*a.args(), *b.args(), pbox + np.r_[-0.01, -0.01, -0.01, 0.01, 0.01, 0.01], *ws)
+    assert got[0] and got[1] == pytest.approx(0.1, rel=1e-12)
 
 
 # ----------------------------------------------------------------------------- walls

@@ -193,7 +193,7 @@ def pair_pass(g, bd, nl, prm, law, flags, dt, frow, trow, erow, bonds, bprm, bro
                         nl.tj, nl.act, nl.epair, frow, trow, erow)
     P._pair_forces(nl.start, nl.pj, sg.xs, sg.vs, sg.ws, sg.smass, pg.rad, pg.mat, g.qprm, flags, dt, pg.shape,
                    pg.vertex_start, pg.face_start, pg.fvstart, pg.fverts, pg.bvstart, pg.bfstart, pg.wvert, pg.wnorm,
-                   pg.woff, nl.ft, nl.fc, nl.tj, nl.act, nl.epair, nl.geo, frow, trow, erow, nl.sep, nl.sdir, ns)
+                   pg.woff, nl.ft, nl.fc, nl.tj, nl.act, nl.epair, nl.geo, frow, trow, erow, nl.sep, nl.sdir, nl.pbox, ns)
 
 
 @njit

@@ -39,8 +39,8 @@ from numba import prange
 from demcli.jit import njit
 from demcli.kernels.contact import _to_tangent_plane
 from demcli.kernels.layout import F_DASHPOT, F_ENERGY, F_FRICTION
-from demcli.kernels.polyhedra import (contact_frame, max_row, overlap_ws, plane_overlap, scratch,
-                                      to_world_planes, to_world_vertices)
+from demcli.kernels.polyhedra import (BOX_PAD, contact_frame, max_row, overlap_in_box, overlap_ws, plane_overlap,
+                                      scratch, to_world_planes, to_world_vertices)
 from demcli.kernels.separation import gap, separating_direction
 
 PolyGeometry = namedtuple("PolyGeometry", "rad mat shape vertex_start vertices face_start fvstart fverts "
@@ -188,7 +188,7 @@ def _still_separated(code, na, da, va, nb_, db_, vb, margin):
 @njit(parallel=True, internal=True)
 def _pair_forces(start, pj, x, v, w, mass, rad, bmat, prm, sw, dt,
                  shape, vertex_start, face_start, fvstart, fverts, bvstart, bfstart, wvert, wnorm, woff,
-                 ft, fc, tj, act, epair, geo, frow, trow, erow, sep, sdir, r0):
+                 ft, fc, tj, act, epair, geo, frow, trow, erow, sep, sdir, pbox, r0):
     """Force of every listed pair into its own row; the row owner i sums its side; rows from
     ``r0`` (0; a mixed scene: its polyhedra, :mod:`demcli.kernels.shapes.mixed`).
 
@@ -197,6 +197,9 @@ def _pair_forces(start, pj, x, v, w, mass, rad, bmat, prm, sw, dt,
     sep[c], sdir[c]: the cached separating face or direction (SEP_* codes above): a pair still cleared by
     it skips the exact overlap, which would find V = 0 (the results do not depend on the
     cache). A direction that no longer clears is searched again from where it was.
+    pbox[c] (6): the bounding box of pair c's intersection at its last evaluation (zeros: none, the
+    pair did not touch); a touching pair is evaluated in that box widened by BOX_PAD min(r_i, r_j)
+    (:func:`overlap_in_box`, exact when I stays inside it; else the full :func:`overlap_ws`).
     """
     friction = sw[F_FRICTION]
     energy = sw[F_ENERGY]
@@ -217,6 +220,7 @@ def _pair_forces(start, pj, x, v, w, mass, rad, bmat, prm, sw, dt,
         c1 = start[i + 1]
         if c1 > c0:
             buf, fw, planes = scratch(max_fv, max_f)  # once per row, not per pair
+            box = np.empty(6)
             xi0 = x[i, 0]
             xi1 = x[i, 1]
             xi2 = x[i, 2]
@@ -245,47 +249,66 @@ def _pair_forces(start, pj, x, v, w, mass, rad, bmat, prm, sw, dt,
                     vb = wvert[bvstart[j]:bvstart[j + 1]]
                     nb_ = wnorm[bfstart[j]:bfstart[j + 1]]
                     db_ = woff[bfstart[j]:bfstart[j + 1]]
-                    code = sep[c]
-                    margin = SEP_MARGIN * rs + 1e-12 * max(abs(xi0), abs(xi1), abs(xi2), abs(xj0), abs(xj1),
-                                                          abs(xj2))
-                    if code == SEP_DIR:
-                        apart = gap(sdir[c, 0], sdir[c, 1], sdir[c, 2], va, vb) > margin
-                        if not apart:
-                            apart, ux, uy, uz = separating_direction(va, vb, sdir[c, 0], sdir[c, 1], sdir[c, 2],
-                                                                     margin, SEP_ITER, buf)
-                            if apart:
-                                sdir[c, 0] = ux
-                                sdir[c, 1] = uy
-                                sdir[c, 2] = uz
-                    else:
-                        apart = code != 0 and code != SEP_NONE and _still_separated(code, na, da, va, nb_, db_, vb,
-                                                                                    margin)
-                    if apart:
-                        vol = 0.0
-                    else:
-                        vol, gx, gy, gz, sx, sy, sz = overlap_ws(
+                    fsb = fvstart[face_start[kj]:face_start[kj + 1] + 1]
+                    if pbox[c, 3] > pbox[c, 0]:  # touching at the last evaluation: coherent culling
+                        pad = BOX_PAD * min(ri, rj)
+                        for k in range(3):
+                            box[k] = pbox[c, k] - pad
+                            box[3 + k] = pbox[c, 3 + k] + pad
+                        ok, vol, gx, gy, gz, sx, sy, sz = overlap_in_box(
                             va, fsa, fverts, offa, na, da, xi0, xi1, xi2, ri,
-                            vb, fvstart[face_start[kj]:face_start[kj + 1] + 1], fverts,
-                            vertex_start[kj], nb_, db_, xj0, xj1, xj2, rj, buf, fw, planes)
-                        if not vol > 0.0 and code != SEP_NONE:
-                            ga, fa = _clearance(na, da, vb)
-                            gb, fb = _clearance(nb_, db_, va)
-                            if ga > margin and ga >= gb:
-                                sep[c] = fa + 1
-                            elif gb > margin:
-                                sep[c] = -(fb + 1)
-                            else:
-                                found, ux, uy, uz = separating_direction(va, vb, -dx, -dy, -dz, margin, SEP_ITER,
-                                                                         buf)
-                                if found:
-                                    sep[c] = SEP_DIR
+                            vb, fsb, fverts, vertex_start[kj], nb_, db_, xj0, xj1, xj2, rj, box, buf, fw, planes)
+                        if not ok:
+                            vol, gx, gy, gz, sx, sy, sz = overlap_ws(
+                                va, fsa, fverts, offa, na, da, xi0, xi1, xi2, ri,
+                                vb, fsb, fverts, vertex_start[kj], nb_, db_, xj0, xj1, xj2, rj, buf, fw, planes)
+                    else:
+                        code = sep[c]
+                        margin = SEP_MARGIN * rs + 1e-12 * max(abs(xi0), abs(xi1), abs(xi2), abs(xj0), abs(xj1),
+                                                              abs(xj2))
+                        if code == SEP_DIR:
+                            apart = gap(sdir[c, 0], sdir[c, 1], sdir[c, 2], va, vb) > margin
+                            if not apart:
+                                apart, ux, uy, uz = separating_direction(va, vb, sdir[c, 0], sdir[c, 1], sdir[c, 2],
+                                                                         margin, SEP_ITER, buf)
+                                if apart:
                                     sdir[c, 0] = ux
                                     sdir[c, 1] = uy
                                     sdir[c, 2] = uz
+                        else:
+                            apart = code != 0 and code != SEP_NONE and _still_separated(code, na, da, va, nb_, db_, vb,
+                                                                                        margin)
+                        if apart:
+                            vol = 0.0
+                        else:
+                            vol, gx, gy, gz, sx, sy, sz = overlap_ws(
+                                va, fsa, fverts, offa, na, da, xi0, xi1, xi2, ri,
+                                vb, fsb, fverts, vertex_start[kj], nb_, db_, xj0, xj1, xj2, rj, buf, fw, planes)
+                            if not vol > 0.0 and code != SEP_NONE:
+                                ga, fa = _clearance(na, da, vb)
+                                gb, fb = _clearance(nb_, db_, va)
+                                if ga > margin and ga >= gb:
+                                    sep[c] = fa + 1
+                                elif gb > margin:
+                                    sep[c] = -(fb + 1)
                                 else:
-                                    sep[c] = SEP_NONE
-                        elif vol > 0.0:
-                            sep[c] = 0
+                                    found, ux, uy, uz = separating_direction(va, vb, -dx, -dy, -dz, margin, SEP_ITER,
+                                                                             buf)
+                                    if found:
+                                        sep[c] = SEP_DIR
+                                        sdir[c, 0] = ux
+                                        sdir[c, 1] = uy
+                                        sdir[c, 2] = uz
+                                    else:
+                                        sep[c] = SEP_NONE
+                            elif vol > 0.0:
+                                sep[c] = 0
+                if vol > 0.0:  # the pieces' box of this evaluation (fw[22:28]): the next step's culling box
+                    for k in range(6):
+                        pbox[c, k] = fw[22 + k]
+                elif pbox[c, 3] != 0.0 or pbox[c, 0] != 0.0:
+                    for k in range(6):
+                        pbox[c, k] = 0.0
                 if not vol > 0.0:
                     if act[c]:
                         act[c] = 0
@@ -377,7 +400,7 @@ def pair_pass(g, bd, nl, prm, law, flags, dt, frow, trow, erow, bonds, bprm, bro
     """Every listed pair's force into its own row (bonds do not join polyhedra)."""
     _pair_forces(nl.start, nl.pj, bd.x, bd.v, bd.w, bd.mass, g.rad, g.mat, prm, flags, dt,
                  g.shape, g.vertex_start, g.face_start, g.fvstart, g.fverts, g.bvstart, g.bfstart, g.wvert, g.wnorm,
-                 g.woff, nl.ft, nl.fc, nl.tj, nl.act, nl.epair, nl.geo, frow, trow, erow, nl.sep, nl.sdir, 0)
+                 g.woff, nl.ft, nl.fc, nl.tj, nl.act, nl.epair, nl.geo, frow, trow, erow, nl.sep, nl.sdir, nl.pbox, 0)
 
 
 @njit
