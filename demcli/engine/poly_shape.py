@@ -167,8 +167,9 @@ def shape_tables(sh):
 
 
 def world_rows(shapes, shape):
-    """(bvstart, bfstart, (wvert, wnorm, woff)): each row's slice of the world vertex and face
-    arrays for the templates ``shape`` (-1: a row without vertices, a sphere of a mixed scene)."""
+    """(bvstart, bfstart, (wvert, wnorm, woff, travel)): each row's slice of the world vertex and
+    face arrays for the templates ``shape`` (-1: a row without vertices, a sphere of a mixed
+    scene), and the rows' travel (zeros, see :class:`demcli.kernels.shapes.polyhedra.PolyGeometry`)."""
     vs, fs = shapes[0], shapes[2]
     has = shape >= 0
     nv = np.zeros(len(shape), np.int64)
@@ -180,7 +181,7 @@ def world_rows(shapes, shape):
     bvstart[1:] = np.cumsum(nv)
     bfstart[1:] = np.cumsum(nf)
     return bvstart, bfstart, (np.zeros((int(bvstart[-1]), 3)), np.zeros((int(bfstart[-1]), 3)),
-                              np.zeros(int(bfstart[-1])))
+                              np.zeros(int(bfstart[-1])), np.zeros(len(shape)))
 
 
 class PolyShape:

@@ -57,7 +57,8 @@ def contacts_tuple(start, ci, cj, rows, wstart, wa, ww, wrows, xref, n_walls, pe
     return K.Contacts(start, ci, cj, np.zeros(len(start), np.int64), _EMPTY_I, rows["ft"], rows["mr"],
                       rows["force"], np.zeros((npair if per_pair_torque else 0, 3)), np.ones(npair, np.uint8),
                       _empty2(2), geo, np.zeros(npair if volumetric else 0, np.int32),
-                      np.zeros((npair if volumetric else 0, 3)), rows.get("box", np.zeros((0, 6))), wstart, wa, ww, wrows["ft"], wrows["mr"], wfc,
+                      np.zeros((npair if volumetric else 0, 3)), np.zeros(npair if volumetric else 0),
+                      rows.get("box", np.zeros((0, 6))), wstart, wa, ww, wrows["ft"], wrows["mr"], wfc,
                       np.zeros((nq, 3)), np.zeros((0, 2)), wgeo, xref, np.zeros((n_walls, 3)))
 
 

@@ -102,7 +102,8 @@ def rebuild_lists(g, bd, nl, par, flags, wa, bonds, bprm, vol, pair_torque):
     return Contacts(nstart, npi, npj, rstart, rlist, nft, nmr, np.empty((npair, 3)),  # fc: read where act only
                     np.zeros((npair if pair_torque else 0, 3)), act,
                     np.zeros((npair if flags[F_ENERGY] else 0, 2)), np.zeros((npair if vol else 0, 3)),
-                    np.zeros(npair if vol else 0, np.int32), np.zeros((npair if vol else 0, 3)), npbox,
+                    np.zeros(npair if vol else 0, np.int32), np.zeros((npair if vol else 0, 3)),
+                    np.zeros(npair if vol else 0), npbox,
                     wstart, wprim, wwall, wft, wmr, wfc, wtq, wen, wgeo, xs.copy(), nl.wref)
 
 

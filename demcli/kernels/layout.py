@@ -46,12 +46,13 @@ WallArrays = namedtuple("WallArrays", "kind point normal radius v material contr
 """Walls: kind (int8), point, normal, radius, v, material, control (int8), prm (W_* columns),
 force (sum of contact forces on each wall), kn (servo stiffness)."""
 
-Contacts = namedtuple("Contacts", "start pi pj rstart rlist ft mr fc tj act epair geo sep sdir pbox "
+Contacts = namedtuple("Contacts", "start pi pj rstart rlist ft mr fc tj act epair geo sep sdir sclear pbox "
                                   "wstart wprim wwall wft wmr wfc wtq wen wgeo xref wref")
 """Neighbour and contact state, rebuilt by the engine: pair CSR (start, pi, pj; i < j) and its
 reverse (rstart, rlist); per pair tangential spring ft, rolling spring mr, force on i fc, torque on
 j tj, touching flag act (uint8), losses epair; polyhedra: geo (depth, F_N, K_t), sep / sdir (the
-cached separating face or direction), pbox (the bounding box of the last intersection, low xyz, high
+cached separating face or direction), sclear (its clearance plus both bodies' travel when it
+was found: the pair stays apart while the bodies' travel since is smaller), pbox (the bounding box of the last intersection, low xyz, high
 xyz: the next evaluation's culling box; zeros when the pair did not touch); per primitive-wall contact wstart, wprim, wwall, wft, wmr,
 wfc (force on the primitive, servo stiffness, normal force), wtq (torque on the primitive), wen
 (dashpot and slip losses of the step), wgeo; xref (positions at the last

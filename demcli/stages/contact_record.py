@@ -77,7 +77,7 @@ def _placed(system, b):
     vs, _, fs, fvs, fv, _, _ = system.shapes
     k = int(system.shape[b])
     rows = fvs[fs[k]:fs[k + 1] + 1]
-    wvert, wnorm, woff = system.world
+    wvert, wnorm, woff, _ = system.world
     v0, v1, f0, f1 = system.bvstart[b], system.bvstart[b + 1], system.bfstart[b], system.bfstart[b + 1]
     return Placed(wvert[v0:v1], rows - rows[0], fv[rows[0]:rows[-1]] - vs[k], wnorm[f0:f1], woff[f0:f1],
                   system.x[b].copy(), float(system.rad[b]))

@@ -508,19 +508,24 @@ def test_separation_cache_changes_nothing():
     eff = ["gravity", "friction", "local_damping"]
     a = _heap(effects=eff, local_damping=0.2, contact_damping=True)
     b = _heap(effects=eff, local_damping=0.2, contact_damping=True)
-    # When: both run 4000 steps (contacts form and open from step ~2500)
+    # When: both run 8000 steps (contacts form and open from step ~2500)
     faces = directions = 0
     for _ in range(80):
         a.advance(50)
         sep = a.nl.sep
         faces += np.count_nonzero((sep != 0) & (sep != SEP_NONE) & (sep != SEP_DIR))
         directions += np.count_nonzero(sep == SEP_DIR)
-    for _ in range(4000):
+    bounds = 0
+    for _ in range(80):  # (the last clearance plus the travel of both bodies: checks skipped while it holds)
+        bounds = max(bounds, np.count_nonzero(a.nl.sclear > 0.0))
+        a.advance(50)
+    for _ in range(8000):
         b.nl.sep[:] = SEP_NONE
+        b.nl.sclear[:] = 0.0
         b.advance(1)
     # Then: the cache skipped exact overlaps (it held faces, and directions for pairs that only
-    # an edge-edge axis separates) and the runs agree bit for bit
-    assert faces > 0 and directions > 0
+    # an edge-edge axis separates, and the travel bounds of both) and the runs agree bit for bit
+    assert faces > 0 and directions > 0 and bounds > 0
     for name in ("x", "v", "q", "L", "f", "tq"):
         np.testing.assert_array_equal(getattr(a, name), getattr(b, name), err_msg=name)
 
@@ -547,3 +552,22 @@ def test_culling_box_cache_changes_only_round_off():
     np.testing.assert_allclose(a.nl.fc[a.nl.act.astype(bool)], fc, rtol=0, atol=1e-12 * np.abs(fc).max())
     for k, val in with_box.items():
         np.testing.assert_allclose(getattr(a, k), val, rtol=0, atol=1e-12 * np.abs(val).max(), err_msg=k)
+
+
+def test_travel_is_the_largest_vertex_displacement_of_each_step():
+    # Given: two bodies apart in free flight (no gravity), one moving and turning, one at rest
+    rng = np.random.default_rng(8)
+    polys = [random_hull(rng, (0.006, 0.005, 0.004)) for _ in range(2)]
+    s = system(polys, x=[[0.0, 0.0, 0.0], [0.1, 0.0, 0.0]], q=rng.normal(size=(2, 4)), v=[[0.3, -0.1, 0.2], [0, 0, 0]],
+               omega=[[20.0, 5.0, -8.0], [0, 0, 0]], gravity=(0.0, 0.0, 0.0))
+    s.advance(1)
+    wvert = s.world[0]
+    before, travel = wvert.copy(), s.world[3].copy()
+    # When: one more step
+    s.advance(1)
+    # Then: each body's travel grew by its largest vertex displacement (a bound on every point's)
+    step = np.sqrt(((wvert - before) ** 2).sum(axis=1))
+    rows = s.bvstart
+    for b in range(2):
+        assert s.world[3][b] - travel[b] == pytest.approx(step[rows[b]:rows[b + 1]].max(), rel=1e-12, abs=0)
+    assert s.world[3][0] > travel[0] and s.world[3][1] == travel[1]

@@ -155,7 +155,7 @@ def place(g, bd, flags, xref, lim2, rebuild):
     ns = g.ns
     b0 = bd.x.shape[0] - (sg.xs.shape[0] - ns)
     P._world_geometry(bd.x[b0:], bd.q[b0:], pg.shape[ns:], pg.vertex_start, pg.vertices, pg.face_start,
-                      pg.face_normal, pg.face_offset, pg.bvstart[ns:], pg.bfstart[ns:], pg.wvert, pg.wnorm, pg.woff)
+                      pg.face_normal, pg.face_offset, pg.bvstart[ns:], pg.bfstart[ns:], pg.wvert, pg.wnorm, pg.woff, pg.travel[ns:])
 
 
 @njit(inline="always")
@@ -193,7 +193,7 @@ def pair_pass(g, bd, nl, prm, law, flags, dt, frow, trow, erow, bonds, bprm, bro
                         nl.tj, nl.act, nl.epair, frow, trow, erow)
     P._pair_forces(nl.start, nl.pj, sg.xs, sg.vs, sg.ws, sg.smass, pg.rad, pg.mat, g.qprm, flags, dt, pg.shape,
                    pg.vertex_start, pg.face_start, pg.fvstart, pg.fverts, pg.bvstart, pg.bfstart, pg.wvert, pg.wnorm,
-                   pg.woff, nl.ft, nl.fc, nl.tj, nl.act, nl.epair, nl.geo, frow, trow, erow, nl.sep, nl.sdir, nl.pbox, ns)
+                   pg.woff, nl.ft, nl.fc, nl.tj, nl.act, nl.epair, nl.geo, frow, trow, erow, nl.sep, nl.sdir, nl.sclear, nl.pbox, pg.travel, ns)
 
 
 @njit

@@ -39,16 +39,20 @@ from numba import prange
 from demcli.jit import njit
 from demcli.kernels.contact import _to_tangent_plane
 from demcli.kernels.layout import F_DASHPOT, F_ENERGY, F_FRICTION
-from demcli.kernels.polyhedra import (BOX_PAD, contact_frame, max_row, overlap_in_box, overlap_ws, plane_overlap,
-                                      scratch, to_world_planes, to_world_vertices)
+from demcli.kernels.polyhedra import (BOX_PAD, contact_frame, max_row, overlap_in_box, overlap_ws, plane_overlap_ws,
+                                      plane_scratch, scratch, to_world_planes)
+from demcli.kernels.quat import rotate
 from demcli.kernels.separation import gap, separating_direction
 
 PolyGeometry = namedtuple("PolyGeometry", "rad mat shape vertex_start vertices face_start fvstart fverts "
-                                          "face_normal face_offset bvstart bfstart wvert wnorm woff")
+                                          "face_normal face_offset bvstart bfstart wvert wnorm woff travel")
 """Polyhedra: rad (n_b,) bounding radius about the centroid [m]; mat (n_b,) material; shape (n_b,)
 template of each body; vertex_start .. face_offset: the polyhedron_shapes CSR tables (body frame);
 bvstart, bfstart (n_b + 1,) each body's rows of the world arrays wvert (n_v, 3), wnorm (n_f, 3),
-woff (n_f,) (scratch, rewritten every step)."""
+woff (n_f,) (rewritten every step); travel (n_b,) [m]: each body's travel so far, the sum over
+steps of its largest vertex displacement (a bound on how far any of its points has moved since
+an earlier step: the displacement of a rigid motion is affine in the point, its norm largest at
+a vertex)."""
 
 # columns of the material-pair table prm[a, b, :]
 Q_KN = 0      # k_n = 4 E / (3 sqrt(pi)) [Pa]
@@ -134,12 +138,32 @@ def _volumetric_law(prm, ma, mb, vol, depth, area, nx, ny, nz, vx, vy, vz, mstar
 
 @njit(parallel=True, internal=True)
 def _world_geometry(x, q, shape, vertex_start, vertices, face_start, face_normal, face_offset,
-                    bvstart, bfstart, wvert, wnorm, woff):
-    """World vertices and face planes of every body (rows bvstart / bfstart)."""
+                    bvstart, bfstart, wvert, wnorm, woff, travel):
+    """World vertices and face planes of every body (rows bvstart / bfstart); each body's travel
+    grows by its largest vertex displacement since the last call (the vertices as
+    :func:`to_world_vertices` places them, the same arithmetic)."""
     for b in prange(x.shape[0]):
         k = shape[b]
-        to_world_vertices(vertices[vertex_start[k]:vertex_start[k + 1]], x[b], q[b],
-                          wvert[bvstart[b]:bvstart[b + 1]])
+        v0 = vertex_start[k]
+        r0 = bvstart[b]
+        q0 = q[b, 0]
+        q1 = q[b, 1]
+        q2 = q[b, 2]
+        q3 = q[b, 3]
+        step2 = 0.0
+        for i in range(vertex_start[k + 1] - v0):
+            wx, wy, wz = rotate(q0, q1, q2, q3, vertices[v0 + i, 0], vertices[v0 + i, 1], vertices[v0 + i, 2])
+            wx += x[b, 0]
+            wy += x[b, 1]
+            wz += x[b, 2]
+            dx = wx - wvert[r0 + i, 0]
+            dy = wy - wvert[r0 + i, 1]
+            dz = wz - wvert[r0 + i, 2]
+            step2 = max(step2, dx * dx + dy * dy + dz * dz)
+            wvert[r0 + i, 0] = wx
+            wvert[r0 + i, 1] = wy
+            wvert[r0 + i, 2] = wz
+        travel[b] += math.sqrt(step2)
         f0 = face_start[k]
         f1 = face_start[k + 1]
         to_world_planes(face_normal[f0:f1], face_offset[f0:f1], x[b], q[b],
@@ -167,8 +191,9 @@ def _clearance(n, d, verts):
 
 
 @njit(inline="always")
-def _still_separated(code, na, da, va, nb_, db_, vb, margin):
-    """Whether the cached face ``code`` (see ``sep`` in the constants above) still clears the other body by ``margin``."""
+def _face_gap(code, na, da, va, nb_, db_, vb, margin):
+    """The gap the cached face ``code`` (see ``sep`` in the constants above) leaves to the other
+    body [m]: min over its vertices of n . v - d, or the first value <= ``margin`` met."""
     if code > 0:
         f = code - 1
         n = na
@@ -179,16 +204,19 @@ def _still_separated(code, na, da, va, nb_, db_, vb, margin):
         n = nb_
         d = db_
         verts = va
+    g = math.inf
     for k in range(verts.shape[0]):
-        if n[f, 0] * verts[k, 0] + n[f, 1] * verts[k, 1] + n[f, 2] * verts[k, 2] - d[f] <= margin:
-            return False
-    return True
+        t = n[f, 0] * verts[k, 0] + n[f, 1] * verts[k, 1] + n[f, 2] * verts[k, 2] - d[f]
+        if t <= margin:
+            return t
+        g = min(g, t)
+    return g
 
 
 @njit(parallel=True, internal=True)
 def _pair_forces(start, pj, x, v, w, mass, rad, bmat, prm, sw, dt,
                  shape, vertex_start, face_start, fvstart, fverts, bvstart, bfstart, wvert, wnorm, woff,
-                 ft, fc, tj, act, epair, geo, frow, trow, erow, sep, sdir, pbox, r0):
+                 ft, fc, tj, act, epair, geo, frow, trow, erow, sep, sdir, sclear, pbox, travel, r0):
     """Force of every listed pair into its own row; the row owner i sums its side; rows from
     ``r0`` (0; a mixed scene: its polyhedra, :mod:`demcli.kernels.shapes.mixed`).
 
@@ -197,6 +225,10 @@ def _pair_forces(start, pj, x, v, w, mass, rad, bmat, prm, sw, dt,
     sep[c], sdir[c]: the cached separating face or direction (SEP_* codes above): a pair still cleared by
     it skips the exact overlap, which would find V = 0 (the results do not depend on the
     cache). A direction that no longer clears is searched again from where it was.
+    sclear[c] [m]: the gap the cache left when last checked plus both bodies' travel then
+    (``travel``, :class:`PolyGeometry`); while sclear[c] - travel[i] - travel[j] > margin the
+    bodies have not moved enough to close it (the fixed plane of that check still parts them:
+    each body's points moved less than its travel since) and the check itself is skipped.
     pbox[c] (6): the bounding box of pair c's intersection at its last evaluation (zeros: none, the
     pair did not touch); a touching pair is evaluated in that box widened by BOX_PAD min(r_i, r_j)
     (:func:`overlap_in_box`, exact when I stays inside it; else the full :func:`overlap_ws`).
@@ -266,18 +298,30 @@ def _pair_forces(start, pj, x, v, w, mass, rad, bmat, prm, sw, dt,
                         code = sep[c]
                         margin = SEP_MARGIN * rs + 1e-12 * max(abs(xi0), abs(xi1), abs(xi2), abs(xj0), abs(xj1),
                                                               abs(xj2))
-                        if code == SEP_DIR:
-                            apart = gap(sdir[c, 0], sdir[c, 1], sdir[c, 2], va, vb) > margin
-                            if not apart:
-                                apart, ux, uy, uz = separating_direction(va, vb, sdir[c, 0], sdir[c, 1], sdir[c, 2],
+                        moved = travel[i] + travel[j]
+                        if sclear[c] - moved > margin:  # not moved enough since the cache last cleared them
+                            apart = True
+                        elif code == SEP_DIR:
+                            g_ = gap(sdir[c, 0], sdir[c, 1], sdir[c, 2], va, vb)
+                            if not g_ > margin:
+                                found, ux, uy, uz = separating_direction(va, vb, sdir[c, 0], sdir[c, 1], sdir[c, 2],
                                                                          margin, SEP_ITER, buf)
-                                if apart:
+                                g_ = -math.inf
+                                if found:
                                     sdir[c, 0] = ux
                                     sdir[c, 1] = uy
                                     sdir[c, 2] = uz
+                                    g_ = gap(ux, uy, uz, va, vb)
+                            apart = g_ > margin
+                            if apart:
+                                sclear[c] = g_ + moved
                         else:
-                            apart = code != 0 and code != SEP_NONE and _still_separated(code, na, da, va, nb_, db_, vb,
-                                                                                        margin)
+                            apart = code != 0 and code != SEP_NONE
+                            if apart:
+                                g_ = _face_gap(code, na, da, va, nb_, db_, vb, margin)
+                                apart = g_ > margin
+                                if apart:
+                                    sclear[c] = g_ + moved
                         if apart:
                             vol = 0.0
                         else:
@@ -289,8 +333,10 @@ def _pair_forces(start, pj, x, v, w, mass, rad, bmat, prm, sw, dt,
                                 gb, fb = _clearance(nb_, db_, va)
                                 if ga > margin and ga >= gb:
                                     sep[c] = fa + 1
+                                    sclear[c] = ga + moved
                                 elif gb > margin:
                                     sep[c] = -(fb + 1)
+                                    sclear[c] = gb + moved
                                 else:
                                     found, ux, uy, uz = separating_direction(va, vb, -dx, -dy, -dz, margin, SEP_ITER,
                                                                              buf)
@@ -299,6 +345,7 @@ def _pair_forces(start, pj, x, v, w, mass, rad, bmat, prm, sw, dt,
                                         sdir[c, 0] = ux
                                         sdir[c, 1] = uy
                                         sdir[c, 2] = uz
+                                        sclear[c] = gap(ux, uy, uz, va, vb) + moved
                                     else:
                                         sep[c] = SEP_NONE
                             elif vol > 0.0:
@@ -374,7 +421,7 @@ def _pair_forces(start, pj, x, v, w, mass, rad, bmat, prm, sw, dt,
 def place(g, bd, flags, xref, lim2, rebuild):
     """World vertices and face planes of every body."""
     _world_geometry(bd.x, bd.q, g.shape, g.vertex_start, g.vertices, g.face_start, g.face_normal, g.face_offset,
-                    g.bvstart, g.bfstart, g.wvert, g.wnorm, g.woff)
+                    g.bvstart, g.bfstart, g.wvert, g.wnorm, g.woff, g.travel)
 
 
 @njit(inline="always")
@@ -400,7 +447,7 @@ def pair_pass(g, bd, nl, prm, law, flags, dt, frow, trow, erow, bonds, bprm, bro
     """Every listed pair's force into its own row (bonds do not join polyhedra)."""
     _pair_forces(nl.start, nl.pj, bd.x, bd.v, bd.w, bd.mass, g.rad, g.mat, prm, flags, dt,
                  g.shape, g.vertex_start, g.face_start, g.fvstart, g.fverts, g.bvstart, g.bfstart, g.wvert, g.wnorm,
-                 g.woff, nl.ft, nl.fc, nl.tj, nl.act, nl.epair, nl.geo, frow, trow, erow, nl.sep, nl.sdir, nl.pbox, 0)
+                 g.woff, nl.ft, nl.fc, nl.tj, nl.act, nl.epair, nl.geo, frow, trow, erow, nl.sep, nl.sdir, nl.sclear, nl.pbox, g.travel, 0)
 
 
 @njit
@@ -432,6 +479,7 @@ def _wall_forces(wstart, wwall, x, v, w, mass, rad, bmat, shape, vertex_start, f
         da = woff[bfstart[b]:bfstart[b + 1]]
         fsa = fvstart[face_start[kb]:face_start[kb + 1] + 1]
         offa = vertex_start[kb]
+        buf, heights, sd, work = plane_scratch(max_row(fsa), va.shape[0])  # once per body
         xb0 = x[b, 0]
         xb1 = x[b, 1]
         xb2 = x[b, 2]
@@ -445,8 +493,8 @@ def _wall_forces(wstart, wwall, x, v, w, mass, rad, bmat, shape, vertex_start, f
             gx = gy = gz = sx = sy = sz = 0.0
             if wkind[wl] == 0:  # plane; the registry refuses other kinds for polyhedra
                 wd = wnx * wpoint[wl, 0] + wny * wpoint[wl, 1] + wnz * wpoint[wl, 2]
-                vol, gx, gy, gz, sx, sy, sz = plane_overlap(va, fsa, fverts, offa, na, da, xb0, xb1, xb2, rb,
-                                                            wnx, wny, wnz, wd)
+                vol, gx, gy, gz, sx, sy, sz = plane_overlap_ws(va, fsa, fverts, offa, na, da, xb0, xb1, xb2, rb,
+                                                               wnx, wny, wnz, wd, buf, heights, sd, work)
             if not vol > 0.0:
                 for col in range(4):
                     wfc[k, col] = 0.0
