@@ -13,6 +13,11 @@ held at its peak load (the case's ``load.max``, constant), runs 200 steps for th
 to take the load, then times K windows of N steps each on T threads and prints the median
 body-steps/s, the touching pairs per body and the cost per touching pair. The last line is
 ``particle_steps_per_s=<median body-steps/s>`` (the bench runner's convention).
+
+``--export FILE.npz`` writes the bed after those 200 steps for a peer code (``bench/yade_loaded_bed.py``
+runs it in YADE Polyhedra): each body's world vertices, mass, position, velocity and fixed
+degrees of freedom, the plane walls, the sleeper's load, the time step, gravity, local damping,
+friction and the volumetric stiffness (see :func:`export_bed`).
 """
 
 import argparse
@@ -64,18 +69,52 @@ def loaded_system(case_path, state, threads):
     return system
 
 
+def export_bed(s, path):
+    """The loaded bed ``s`` as arrays a peer code can rebuild (``path``, .npz).
+
+    YADE's volumetric law is F_N = k V (k = E1 E2 / (E1 + E2) [N/m^3]), ours F_N = k_n sqrt(V d):
+    for a flat overlap of area A the contact stiffnesses are k A and k_n sqrt(A), equal at
+    k = k_n / sqrt(A). ``yade_young`` = 2 k_n / sqrt(A_median) over the bed's touching pairs (the
+    same stiffness at the median contact area; E1 = E2)."""
+    import numpy as np
+
+    from demcli.kernels.shapes.polyhedra import G_DEPTH, G_FN, Q_KN, Q_MU
+
+    nl = s.nl
+    act = nl.act.astype(bool)
+    depth = nl.geo[act, G_DEPTH]
+    fn = nl.geo[act, G_FN]
+    kn = float(s.prm[s.bmat[0], s.bmat[0], Q_KN])
+    # F_N = k_n sqrt(V d) and V = A d (flat): A = (F_N / (k_n d))^2
+    area = (fn / (kn * depth)) ** 2
+    wvert = s.world[0]
+    par = s.kernel_params()
+    act_rows = s._actors
+    np.savez(path, vertices=wvert, vertex_start=s.bvstart, mass=s.mass, x=s.x, v=s.v, flags=s.bflags,
+             wall_point=s.wpoint, wall_normal=np.asarray(s.walls.normal), actor_body=np.asarray(act_rows["body"]),
+             actor_load=np.asarray(act_rows["load_mean"]), dt=s.dt, gravity=np.asarray(par.gravity),
+             local_damping=par.local, friction=float(s.prm[s.bmat[0], s.bmat[0], Q_MU]), kn=kn,
+             contact_area_median=float(np.median(area)), yade_young=2.0 * kn / float(np.sqrt(np.median(area))),
+             touching_pairs=int(act.sum()))
+
+
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("case", nargs="?", default=str(HERE.parent / "cases" / "quickstart.yaml"))
     p.add_argument("--steps", type=int, default=200)
     p.add_argument("--repeat", type=int, default=3)
     p.add_argument("--threads", type=int, default=1)
+    p.add_argument("--export", default=None, help="write the bed after the first 200 steps to this .npz and stop")
     a = p.parse_args(argv)
     name = Path(a.case).stem
     cache = Path(os.environ.get("DEMCLI_BENCH_CACHE", Path.home() / ".cache" / "demcli" / "bench")) / name
     state = loaded_state(a.case, cache)
     s = loaded_system(a.case, state, a.threads)
     s.advance(200)  # the contacts take the peak load
+    if a.export:
+        export_bed(s, a.export)
+        print(f"wrote {a.export}: {len(s.mass)} bodies, {int(s.nl.act.sum())} touching pairs")
+        return
     rates = []
     for _ in range(a.repeat):
         t = time.perf_counter()

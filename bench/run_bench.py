@@ -497,6 +497,45 @@ def run_asphalt(a):
     return run_block_script(a, "bench_asphalt", args, "asphalt_compact_exponent=")
 
 
+def run_loaded_bed(a, env0, yade, work):
+    """The loaded bed (bench_loaded_bed.py) on 1 and 2 threads and, with YADE installed, the same bed
+    in YADE Polyhedra (yade_loaded_bed.py on the bed the first exports), alternated a.repeat times:
+    Markdown table rows."""
+    bed = os.path.join(work, "loaded_bed.npz")
+    steps = ["--steps", "100", "--repeat", "1"] if a.quick else []
+    runs = [(f"demcli t={t}", [sys.executable, os.path.join(HERE, "bench_loaded_bed.py"), "--threads", str(t)]
+             + steps) for t in (1, 2)]
+    if yade:
+        print(f"  [{time.strftime('%H:%M:%S')}] loaded bed: export for YADE ...", flush=True)
+        rec = run_proc([sys.executable, os.path.join(HERE, "bench_loaded_bed.py"), "--export", bed], ROOT,
+                       dict(env0), a.timeout)
+        if os.path.exists(bed):
+            runs.append(("YADE Polyhedra", ["yade", "-j1", "-n", "-x", os.path.join(HERE, "yade_loaded_bed.py"), bed]
+                         + (["50", "1"] if a.quick else [])))
+        else:
+            print(f"    export failed: {rec['error'] or rec['last']}", flush=True)
+    out = {label: [] for label, _ in runs}
+    for k in range(1, a.repeat + 1):
+        for label, cmd in runs:
+            print(f"  [{time.strftime('%H:%M:%S')}] loaded bed {label} run {k} (load {load()}) ...", flush=True)
+            rec = run_proc(cmd, ROOT, dict(env0, OMP_NUM_THREADS="1"), a.timeout)
+            line = next((ln for ln in reversed(rec["lines"]) if " body-steps/s" in ln), rec["error"] or "?")
+            print(f"    {line}", flush=True)
+            out[label].append((rec["rate"], line, " ".join(["python"] + cmd[1:]) if cmd[0] == sys.executable
+                               else " ".join(cmd)))
+    rows = ["| code | median body-steps/s | runs | x YADE | last run |", "|---|---|---|---|---|"]
+    ref = [r for r, _, _ in out.get("YADE Polyhedra", []) if r]
+    yade_med = statistics.median(ref) if ref else None
+    for label, recs in out.items():
+        rates = [r for r, _, _ in recs if r]
+        med = statistics.median(rates) if rates else None
+        ratio = f"{med / yade_med:.0f}" if med and yade_med else ""
+        rows.append(f"| {label} | {fmt(med)} | {', '.join(fmt(r) for r in rates)} | {ratio} | "
+                    f"{recs[-1][1].split('): ')[-1].replace('|', '/')} |")
+    rows += ["", "Commands: " + "; ".join(f"`{recs[0][2].replace(ROOT + '/', '')}`" for recs in out.values())]
+    return rows
+
+
 def run_jit(a):
     """bench/bench_jit.py (cold and warm compile): (command, markdown block or a FAILED line)."""
     return run_block_script(a, "bench_jit", [], "jit_cold_s=")
@@ -594,13 +633,11 @@ def main(argv=None):
     sieve = None if a.no_sieve else run_sieve(a.quick)
     asphalt = None if a.no_asphalt else run_asphalt(a)
     jit = None if (a.no_jit or a.quick) else run_jit(a)
-    # 2D sections; ballast library build rate; polyhedron narrow phase; a bonded specimen; the quickstart's
-    # sleeper bed under its peak load, 1 and 2 threads (no peer has these)
+    bed = None if a.no_extras else run_loaded_bed(a, env0, "yade" in installed and not a.skip_peers, work)
+    # 2D sections; ballast library build rate; polyhedron narrow phase; a bonded specimen (no peer has these)
     others = []
     extras = [("bench_polygons.py", [], ["--quick"]), ("bench_library.py", [], ["--quick"]),
-              ("bench_polyhedra.py", [], []), ("bench_bonds.py", [], ["--steps", "2000"]),
-              ("bench_loaded_bed.py", ["--threads", "1"], ["--threads", "1", "--repeat", "1"]),
-              ("bench_loaded_bed.py", ["--threads", "2"], ["--threads", "2", "--repeat", "1"])]
+              ("bench_polyhedra.py", [], []), ("bench_bonds.py", [], ["--steps", "2000"])]
     for script, args, qargs in ([] if a.no_extras else extras):
         args = qargs if a.quick else args
         cmd = [sys.executable, os.path.join(HERE, script)] + args
@@ -660,6 +697,11 @@ def main(argv=None):
         md += ["", f"JIT compile: seconds in numba's compiler lock (compiling, or loading from the cache) and the "
                    f"whole `demcli run`'s wall and CPU time, with an empty numba cache (cold) and from it (warm), "
                    f"one thread (`{jit[0]}`):", "", jit[1]]
+    if bed:
+        md += ["", "Loaded polyhedral bed (the ballast box's real workload): the quickstart's sleeper bed under its "
+                   "peak load, built by `bench/bench_loaded_bed.py` from the shipped case, the same bed in YADE "
+                   "Polyhedra (`bench/yade_loaded_bed.py`: the same stones, load, walls, dt, friction and damping, its "
+                   "volumetric law at our contact stiffness at the median contact area), runs alternated:", ""] + bed
     if others:
         md += ["", "demcli only (no peer has these): each script's figure line, one run:", ""]
         md += [f"- `{cmd}`: `{last}`" for cmd, last in others]
