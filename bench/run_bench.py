@@ -634,6 +634,10 @@ def main(argv=None):
     asphalt = None if a.no_asphalt else run_asphalt(a)
     jit = None if (a.no_jit or a.quick) else run_jit(a)
     bed = None if a.no_extras else run_loaded_bed(a, env0, "yade" in installed and not a.skip_peers, work)
+    packed = None if a.no_extras else run_block_script(
+        a, "bench_packed_bed", ["--peers", ",".join(p for p in installed if p != "yade"), "--peers-dir", a.peers_dir]
+        + (["--n", "2000", "--steps", "2000", "--repeat", "1", "--settle", "100000"] if a.quick else
+           ["--repeat", str(a.repeat)]), "packed_bed_demcli_1t=")
     # 2D sections; ballast library build rate; polyhedron narrow phase; a bonded specimen (no peer has these)
     others = []
     extras = [("bench_polygons.py", [], ["--quick"]), ("bench_library.py", [], ["--quick"]),
@@ -697,6 +701,9 @@ def main(argv=None):
         md += ["", f"JIT compile: seconds in numba's compiler lock (compiling, or loading from the cache) and the "
                    f"whole `demcli run`'s wall and CPU time, with an empty numba cache (cold) and from it (warm), "
                    f"one thread (`{jit[0]}`):", "", jit[1]]
+    if packed:
+        md += ["", f"Packed sphere bed (coordination 4-6; the peers' scenes above have ~0.3 contacts per sphere), "
+                   f"demcli against LIGGGHTS and LAMMPS with the peers' own inputs (`{packed[0]}`):", "", packed[1]]
     if bed:
         md += ["", "Loaded polyhedral bed (the ballast box's real workload): the quickstart's sleeper bed under its "
                    "peak load, built by `bench/bench_loaded_bed.py` from the shipped case, the same bed in YADE "

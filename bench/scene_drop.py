@@ -48,7 +48,14 @@ def make_system(n, variant="dense", skin=0.3, order="lattice"):
     if order == "cells":
         perm = cell_order(pos, mean_spacing(pos))
         pos, vel = pos[perm], vel[perm]
-    lx, ly, lz = nx * s, ny * s, 2.0 * nz * s
+    return system_of(pos, vel, (nx * s, ny * s, 2.0 * nz * s), skin)
+
+
+def system_of(pos, vel, box, skin=0.3):
+    """A System of the scene's spheres (d 2 mm, rho 2650, the linear law, gravity, dt 1e-6 s) at
+    ``pos`` with ``vel`` in the closed box (0, 0, 0)..``box`` [m]."""
+    n = len(pos)
+    idx = np.arange(n)
     m = RHO * math.pi / 6 * D ** 3
     zeta = -math.log(0.5) / math.sqrt(math.pi ** 2 + math.log(0.5) ** 2)
     cn = 2 * zeta * math.sqrt(m / 2 * KN)
@@ -58,7 +65,7 @@ def make_system(n, variant="dense", skin=0.3, order="lattice"):
                    "id": idx.astype(np.int64)},
         "spheres": {"body": idx.astype(np.int64), "offset": np.zeros((n, 3)), "radius": np.full(n, D / 2),
                     "material": np.zeros(n, np.int64)}}
-    walls = Walls.box_faces((lx, ly, lz))
+    walls = Walls.box_faces(tuple(box))
     model = ContactModel(law="linear", kn=KN, kt=KN / 4, cn=cn)
     mats = [Material("glass", RHO, friction=0.5)]
     plan = make_plan(["gravity", "friction"], walls=True)
