@@ -7,8 +7,10 @@ written with it) and the series ``force_chains.pvd``. One line cell per contact
 to the contact point for a wall contact. Cell data: ``normal_force`` [N] (F . n, > 0 pushing
 apart), ``tangential_force`` [N] (magnitude), ``overlap`` [m], ``bond_state`` (-1 a contact, 0 an
 intact bond, 1 / 2 a bond broken in tension / shear, still seated) and ``wall`` (the wall index,
--1 for a pair); point data ``body_id`` (-1 on a wall contact's point). In ParaView: colour by
-``normal_force``, or *Tube* with radius scaled by it (docs/measure.md).
+-1 for a pair). Each line has its own two points, with point data ``body_id`` (the body at that
+end, -1 on a wall), ``normal_force`` and ``tangential_force`` (the line's, at both ends). In
+ParaView: colour by ``normal_force``, or *Extract Surface* then *Tube* with Vary Radius By Scalar
+``normal_force`` (docs/measure.md).
 """
 
 from pathlib import Path
@@ -22,18 +24,21 @@ from demcli.state.vtu import PvdSeries, _write_mesh
 
 def force_chain_mesh(x, body_id, contacts):
     """The meshio Mesh of the contacts (a ContactSet) of bodies at ``x`` (n, 3) [m] with ids
-    ``body_id`` (see the module doc)."""
+    ``body_id`` (see the module doc). Each line has its own two points (so that ParaView's *Tube*
+    can vary its radius by the point copy of the contact's normal force)."""
     x = np.asarray(x, float).reshape(-1, 3)
-    on_wall = np.flatnonzero(contacts.b < 0)
-    points = np.concatenate([x, contacts.point[on_wall]])
-    end = contacts.b.copy()
-    end[on_wall] = len(x) + np.arange(len(on_wall))
-    lines = np.stack([contacts.a, end], axis=1).astype(np.int64)
-    cell_data = {"normal_force": [contacts.normal_force()], "tangential_force": [contacts.tangential_force()],
-                 "overlap": [np.asarray(contacts.overlap, float)], "bond_state": [contacts.bond.astype(np.int64)],
-                 "wall": [contacts.wall.astype(np.int64)]}
-    ids = np.concatenate([np.asarray(body_id, np.int64), np.full(len(on_wall), -1, np.int64)])
-    return meshio.Mesh(points, [("line", lines)], point_data={"body_id": ids}, cell_data=cell_data)
+    k = len(contacts.a)
+    pair = contacts.b >= 0
+    far = np.where(pair[:, None], x[np.where(pair, contacts.b, 0)], contacts.point)
+    points = np.stack([x[contacts.a], far], axis=1).reshape(-1, 3)
+    lines = np.arange(2 * k, dtype=np.int64).reshape(-1, 2)
+    fn, ft = contacts.normal_force(), contacts.tangential_force()
+    cell_data = {"normal_force": [fn], "tangential_force": [ft], "overlap": [np.asarray(contacts.overlap, float)],
+                 "bond_state": [contacts.bond.astype(np.int64)], "wall": [contacts.wall.astype(np.int64)]}
+    ids = np.asarray(body_id, np.int64)
+    ends = np.stack([ids[contacts.a], np.where(pair, ids[np.where(pair, contacts.b, 0)], -1)], axis=1).reshape(-1)
+    point_data = {"body_id": ends, "normal_force": np.repeat(fn, 2), "tangential_force": np.repeat(ft, 2)}
+    return meshio.Mesh(points, [("line", lines)], point_data=point_data, cell_data=cell_data)
 
 
 class ForceChains:

@@ -91,6 +91,13 @@ def test_force_chains_and_fields_are_written_beside_the_snapshots(runs):
     assert len(lines) == n_pairs + n_walls
     fn = mesh.cell_data["normal_force"][0]
     assert fn.max() > 0 and np.all(mesh.cell_data["bond_state"][0] == -1)
+    # each line its own two points: a body centre and the other's (or the wall contact point)
+    assert len(mesh.points) == 2 * len(lines) and np.array_equal(mesh.point_data["normal_force"][lines[:, 1]], fn)
+    ids = g["bodies"]["id"][g["spheres"]["body"]]
+    ends = np.sort(mesh.point_data["body_id"][lines[:n_pairs]], axis=1)
+    stored = np.sort(np.stack([ids[g["contacts"]["i"]], ids[g["contacts"]["j"]]], axis=1), axis=1)
+    assert np.array_equal(ends[np.lexsort(ends.T[::-1])], stored[np.lexsort(stored.T[::-1])])
+    assert np.all(mesh.point_data["body_id"][lines[n_pairs:, 1]] == -1)
     assert np.all(mesh.cell_data["wall"][0][:n_pairs] == -1) and np.all(mesh.cell_data["wall"][0][n_pairs:] >= 0)
     # the total normal force on the floor is the bed's weight (at rest, less the side walls' friction)
     on_floor = mesh.cell_data["wall"][0] == 4
