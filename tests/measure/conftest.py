@@ -9,10 +9,11 @@ from demcli.engine.plan import make_plan
 from demcli.engine.system import Dynamics, System, Walls
 
 
-def _system(x, r, pairs, pair_force, wall_rows, walls, sbody=None, soff=None, mass=None):
+def _system(x, r, pairs, pair_force, wall_rows, walls, sbody=None, soff=None, mass=None, bonds=None):
     """A System of spheres (or clumps: body centres ``x``, ``sbody``, ``soff``) whose stored
     contacts are ``pairs`` (k, 2) sphere indices with ``pair_force`` (k, 3) on the first, and
-    ``wall_rows`` [(sphere, wall, force (3,))]."""
+    ``wall_rows`` [(sphere, wall, force (3,))]; ``bonds``: the state groups ``bonds`` and
+    ``bond_models``."""
     x, r = np.asarray(x, float).reshape(-1, 3), np.asarray(r, float)
     clumps = sbody is not None
     sbody = np.arange(len(r)) if sbody is None else np.asarray(sbody, np.int64)
@@ -29,9 +30,10 @@ def _system(x, r, pairs, pair_force, wall_rows, walls, sbody=None, soff=None, ma
                      "force": np.array([w[2] for w in wall_rows], float).reshape(-1, 3)}
     groups = {"bodies": bodies, "spheres": {"body": sbody, "offset": soff, "radius": r,
                                             "material": np.zeros(len(r), np.int64)},
-              "contacts": contacts, "wall_contacts": wall_contacts}
+              "contacts": contacts, "wall_contacts": wall_contacts, **(bonds or {})}
     return System(groups, [Material("glass", 2500.0)], ContactModel(),
-                  make_plan([], clumps=clumps, walls=len(walls) > 0), walls, Dynamics(), dt=1.0)
+                  make_plan([], clumps=clumps, walls=len(walls) > 0, bonds=bonds is not None), walls, Dynamics(),
+                  dt=1.0)
 
 
 def lattice(n, d=1.0, pressure=1.0):

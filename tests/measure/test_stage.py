@@ -14,21 +14,26 @@ from demcli import run_case
 from demcli.measure.probe import COLUMNS
 from demcli.state import read_state
 
-SMOKE = Path(__file__).resolve().parents[2] / "cases" / "smoke" / "beads.yaml"
-MEASURE = ("stages.settle.measure=[{name: bed, type: all, around: walls}, "
-           "{name: core, type: box, min: [3 mm, 3 mm, 2 mm], max: [12 mm, 12 mm, 8 mm]}, "
-           "{name: ball, type: sphere, centre: [7.5 mm, 7.5 mm, 5 mm], radius: 4 mm}, "
-           "{name: tube, type: cylinder, base: [7.5 mm, 7.5 mm, 0], radius: 5 mm, span: [0, 10 mm]}]")
-# under 10 g the beads settle within the smoke case's 3000 steps
-COMMON = ["stages.settle.physics.gravity=[0, 0, -98.1]", "stages.pour.region.max=[14 mm, 14 mm, 24 mm]"]
-OUTPUT = ["stages.settle.output.force_chains=true", "stages.settle.output.fields={width: 1.5 mm, kernel: lucy}"]
+SMOKE = (Path(__file__).resolve().parents[2] / "cases" / "smoke" / "beads.yaml").read_text()
+# under 10 g, poured lower, the beads settle within the smoke case's 3000 steps
+PLAIN = SMOKE.replace("gravity: [0, 0, -9.81]", "gravity: [0, 0, -98.1]").replace("max: [14 mm, 14 mm, 39 mm]",
+                                                                                  "max: [14 mm, 14 mm, 24 mm]")
+MEASURED = PLAIN.replace("    output: {records: 20, snapshots: 3}\n", """\
+    output: {records: 20, snapshots: 3, force_chains: true, fields: {width: 1.5 mm, kernel: lucy}}
+    measure:
+      - {name: bed, type: all, around: walls}
+      - {name: core, type: box, min: [3 mm, 3 mm, 2 mm], max: [12 mm, 12 mm, 8 mm]}
+      - {name: ball, type: sphere, centre: [7.5 mm, 7.5 mm, 5 mm], radius: 4 mm}
+      - {name: tube, type: cylinder, base: [7.5 mm, 7.5 mm, 0], radius: 5 mm, span: [0, 10 mm]}
+""")
 
 
 @pytest.fixture(scope="module")
 def runs(tmp_path_factory):
     base = tmp_path_factory.mktemp("measure_stage")
-    run_case(SMOKE, out=base / "plain", quiet=True, threads=1, overrides=COMMON)
-    run_case(SMOKE, out=base / "measured", quiet=True, threads=1, overrides=COMMON + [MEASURE] + OUTPUT)
+    for name, text in (("plain", PLAIN), ("measured", MEASURED)):
+        (base / f"{name}.yaml").write_text(text)
+        run_case(base / f"{name}.yaml", out=base / name, quiet=True, threads=1)
     return base / "plain", base / "measured"
 
 
@@ -108,3 +113,23 @@ def test_force_chains_and_fields_are_written_beside_the_snapshots(runs):
     rho = grid.point_data["density"]
     assert rho.max() < 2500.0 and rho.max() > 0.4 * 2500.0
     assert grid.point_data["stress"].shape == (len(grid.points), 9) and grid.point_data["pressure"].max() > 0
+
+
+def test_a_resumed_run_continues_the_tables_and_series(runs, tmp_path, interrupt_and_resume):
+    from demcli.engine.system import System
+
+    # Given the measured run interrupted at step 1500 and resumed
+    (tmp_path / "case.yaml").write_text(MEASURED)
+    interrupt_and_resume(System, 1500, tmp_path / "case.yaml", tmp_path / "run", "01-settle.ckpt.h5")
+    # Then its region tables are the uninterrupted ones, bit for bit, and so are its series
+    for name in ("bed", "core", "ball", "tube"):
+        path = f"records/settle_measure_{name}.csv"
+        assert (tmp_path / "run" / path).read_text() == (runs[1] / path).read_text(), name
+    for series in ("force_chains", "fields"):
+        assert (tmp_path / "run" / "settle" / f"{series}.pvd").read_text() == \
+            (runs[1] / "settle" / f"{series}.pvd").read_text()
+        last = sorted((runs[1] / "settle").glob(f"{series}_*.vtu"))[-1].name
+        a, b = meshio.read(tmp_path / "run" / "settle" / last), meshio.read(runs[1] / "settle" / last)
+        assert np.array_equal(a.points, b.points)
+        for key in a.point_data:
+            assert np.array_equal(a.point_data[key], b.point_data[key]), (series, key)
