@@ -76,12 +76,14 @@ for _name, _label, _unit, _display, _scale, _doc in (
 
 
 def check_scene(system, planar):
-    """InputError for a scene the regions cannot measure: spheres with polyhedra, or a 2D case."""
+    """InputError for a scene the measures cannot take: spheres with polyhedra; a 2D case when
+    ``planar`` (regions and fields are per volume)."""
     if system.plugin.name not in ("spheres", "polyhedra"):
-        raise InputError(f"measure: the measurement regions are for sphere, clump and polyhedron scenes; this one "
-                         f"has {system.plugin.name} bodies (spheres with polyhedra)")
+        raise InputError(f"measure: the measures (regions, force chains, fields) are for sphere, clump and polyhedron "
+                         f"scenes; this one has {system.plugin.name} bodies (spheres with polyhedra)")
     if planar:
-        raise InputError("measure: the measurement regions are 3D (their stress is per volume); this case is planar")
+        raise InputError("measure: the measurement regions and coarse-grained fields are 3D (per volume); this case "
+                         "is planar")
 
 
 class MeasureProbe:

@@ -27,8 +27,9 @@ class StageMeasures:
         specs = cfg.get("measure") or ()
         out = cfg.output
         resume = ckpt is not None
-        if specs or out.get("force_chains") or out.get("fields") is not None:
-            check_scene(system, planar)
+        per_volume = bool(specs) or out.get("fields") is not None
+        if per_volume or out.get("force_chains"):
+            check_scene(system, planar and per_volume)  # a planar network is lines as any other
         self.probe = MeasureProbe(system, specs) if specs else None
         self.tables = [RecordTable.from_state(ckpt, f"measure_{s.name}") if resume else
                        RecordTable(f"measure_{s.name}", COLUMNS) for s in specs]

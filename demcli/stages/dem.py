@@ -325,16 +325,25 @@ def scene_check(cfg, case, k, scene, report, shapes=None):
             report("", f"{spec.declared_by} (effect {spec.name}) {msg}")
     if cfg.get("output") is not None and cfg.output.get("packing") is not None and set(shapes) == {"mixed"}:
         report("output.packing", "is for sphere, clump and polyhedron scenes, not yet for spheres with polyhedra")
-    if set(shapes) == {"mixed"}:
-        for key, on in (("measure", cfg.get("measure")), ("output.force_chains", cfg.get("output", {}).get(
-                "force_chains")), ("output.fields", cfg.get("output", {}).get("fields") is not None)):
-            if on:
-                report(key, "is for sphere, clump and polyhedron scenes, not yet for spheres with polyhedra")
+    _measure_check(cfg, case, shapes, report)
     if set(shapes) <= {"polyhedra", "mixed"}:
         for k, w in enumerate(cfg.get("walls", ())):
             if w.type == "cylinder":
                 report(f"walls.{k}.type", "is not for polyhedra: their wall contact is the overlap with a "
                        "half-space (plane and box walls)", w.type)
+
+
+def _measure_check(cfg, case, shapes, report):
+    """The measures a scene cannot take: none on spheres with polyhedra, no regions or fields
+    (per volume) in 2D."""
+    out = cfg.get("output", {})
+    keys = (("measure", bool(cfg.get("measure")), True), ("output.fields", out.get("fields") is not None, True),
+            ("output.force_chains", bool(out.get("force_chains")), False))
+    for key, on, per_volume in keys:
+        if on and set(shapes) == {"mixed"}:
+            report(key, "is for sphere, clump and polyhedron scenes, not yet for spheres with polyhedra")
+        elif on and per_volume and case.dimension == 2:
+            report(key, "is per volume, for 3D cases (this case is planar)")
 
 
 def stage_effects(cfg, dimension, bonded):

@@ -187,3 +187,17 @@ def test_good_measure_settings_pass_check(tmp_path):
                            "    output: {force_chains: true, fields: {width: 2 mm, kernel: lucy}}\n")
     result = CliRunner().invoke(cli, ["check", str(path)])
     assert result.exit_code == 0, result.output
+
+
+@pytest.mark.parametrize("line, refused", [("measure: [{name: a, type: all}]", True),
+                                           ("output: {records: 30, snapshots: 2, fields: {width: 1 mm}}", True),
+                                           ("output: {records: 30, snapshots: 2, force_chains: true}", False)])
+def test_a_planar_case_takes_force_chains_but_no_per_volume_measure(tmp_path, line, refused):
+    # Given the planar smoke case (disks) with a region, fields or force chains in its settle stage
+    text = (Path(__file__).resolve().parents[2] / "cases" / "smoke" / "planar.yaml").read_text()
+    path = tmp_path / "case.yaml"
+    path.write_text(text.replace("    output: {records: 30, snapshots: 2}\n", "") + "    " + line + "\n")
+    result = CliRunner().invoke(cli, ["check", str(path)])
+    # Then regions and fields (per volume) are refused at check, exit code 2; force chains pass
+    assert result.exit_code == (2 if refused else 0), result.output
+    assert ("is per volume, for 3D cases" in result.output) == refused
