@@ -63,6 +63,14 @@ def _check_fields(node, report):
         _check_box(node, report)
 
 
+def _check_output(node, report):
+    """Force chains and fields are written at the snapshots: they need some."""
+    for key, on in (("force_chains", node.force_chains), ("fields", node.fields is not None)):
+        if on and node.snapshots == 0:
+            report(key, "is written at every snapshot: give output.snapshots > 0", node[key] if key != "fields"
+                   else None)
+
+
 FIELDS_SECTION = Section({
     "width": Float("m", min=0, min_inclusive=False, doc="kernel width w: the kernel's standard deviation along "
                                                         "each axis"),
@@ -217,7 +225,7 @@ FIELDS = {
                                doc="also write a checkpoint at the first record after every this much wall-clock "
                                    "time (for runs longer than a job's time limit); `demcli run --resume` "
                                    "continues from it bit-identically. Ctrl-C and SIGTERM always write one"),
-    }, default={}),
+    }, default={}, check=_check_output),
     "measure": MEASURE,
     "neighbors": Section({"skin": Float(min=0, min_inclusive=False, default=0.3,
                                         doc="Verlet skin / mean radius")}, default={}),

@@ -164,6 +164,8 @@ BAD = {
     "output: {fields: {width: 1 mm, kernel: cubic}}": "stages[1].output.fields.kernel: must be one of",
     "output: {fields: {width: 1 mm, min: [0, 0, 0]}}": "stages[1].output.fields.max: give both min and max",
     "output: {force_chains: 3}": "stages[1].output.force_chains: must be",
+    "output: {snapshots: 0, force_chains: true}": "stages[1].output.force_chains: is written at every snapshot",
+    "output: {snapshots: 0, fields: {width: 1 mm}}": "stages[1].output.fields: is written at every snapshot",
 }
 
 
