@@ -100,9 +100,10 @@ class MeasureProbe:
 
         self.regions = [Region(s) for s in specs]
         self.held = (np.asarray(system.bflags) & FIX_TRANSLATION) != 0
+        arounds = {"bodies"} | {r.spec.around for r in self.regions if r.kind == "all"}
         self.boxes = {around: PackingProbe(system, SimpleNamespace(window=None, margin=0.0, around=around,
                                                                    min_contacts=MIN_CONTACTS), False, 1.0, 0.0)
-                      for around in ("bodies", "walls")}
+                      for around in sorted(arounds)}
         geo = self.boxes["bodies"]
         if geo.poly:
             self.body_volume = np.array([geo.templates[k][4] for k in geo.shape])
