@@ -13,6 +13,7 @@ import numpy as np
 from demcli.config.schema import Bool, Float, Int, List, Map, Optional, Section, Str, Tagged, Vector
 from demcli.effects import declared, physics_section, shape_refusals
 from demcli.errors import InputError, StateError
+from demcli.measure.regions import MEASURE, check_box as _check_box
 from demcli.stages.base import ENGINE_KEEPS, ENGINE_OUTPUT, StageType, has_field, register_stage
 
 MOTION = Tagged("mode", {
@@ -48,18 +49,37 @@ MOTION = Tagged("mode", {
 FACES = ("x0", "x1", "y0", "y1", "z0", "z1")
 
 
-def _check_box(node, report):
-    for d in range(3):
-        if node.max[d] <= node.min[d]:
-            report(f"max.{d}", f"must be > min ({node.min[d]:g} m)", node.max[d])
-
-
 def _check_packing(node, report):
     if node.window is not None and node.margin is not None:
         report("margin", "give a window or a margin, not both", node.margin)
     if node.window is not None and node.around is not None:
         report("around", "is the box a margin shrinks; a window is taken as it is", node.around)
 
+
+def _check_fields(node, report):
+    if (node.min is None) != (node.max is None):
+        report("max" if node.max is None else "min", "give both min and max, or neither (the bodies' box)", None)
+    elif node.min is not None:
+        _check_box(node, report)
+
+
+def _check_output(node, report):
+    """Force chains and fields are written at the snapshots: they need some."""
+    for key, on in (("force_chains", node.force_chains), ("fields", node.fields is not None)):
+        if on and node.snapshots == 0:
+            report(key, "is written at every snapshot: give output.snapshots > 0", node[key] if key != "fields"
+                   else None)
+
+
+FIELDS_SECTION = Section({
+    "width": Float("m", min=0, min_inclusive=False, doc="kernel width w: the kernel's standard deviation along "
+                                                        "each axis"),
+    "kernel": Str(choices=["gaussian", "lucy"], default="gaussian",
+                  doc="gaussian (cut at 3 w) or lucy (cutoff 2 sqrt(3) w)"),
+    "spacing": Optional(Float("m", min=0, min_inclusive=False), doc="grid spacing (default: w)"),
+    "min": Optional(Vector(3, "m"), doc="grid box (default: the bodies' bounding box at each snapshot)"),
+    "max": Optional(Vector(3, "m")),
+}, check=_check_fields, doc="coarse graining (Goldhirsch 2010, Weinhart et al. 2012)")
 
 _RIGID = Bool(default=False, doc="E* and G* from the particle alone (an infinitely stiff wall, as in rigid-body "
                                  "impact tests); the wall's material still gives friction and restitution; "
@@ -195,11 +215,18 @@ FIELDS = {
                                       "and coordination without rattlers in a sampling window away from the walls "
                                       "(sphere, clump and polyhedron scenes; records/<stage>_packing.csv, "
                                       "demcli/stages/packing_record.py)"),
+        "force_chains": Bool(default=False, doc="at every snapshot also the contact network as VTU lines (centre to "
+                                                "centre, to the contact point on a wall) with normal and tangential "
+                                                "force, overlap and bond state: <stage>/force_chains_NNNNNN.vtu "
+                                                "(docs/measure.md)"),
+        "fields": Optional(FIELDS_SECTION, doc="at every snapshot also coarse-grained density, velocity and stress "
+                                               "on a grid: <stage>/fields_NNNNNN.vtu (docs/measure.md)"),
         "checkpoint": Optional(Float("s", min=0, min_inclusive=False),
                                doc="also write a checkpoint at the first record after every this much wall-clock "
                                    "time (for runs longer than a job's time limit); `demcli run --resume` "
                                    "continues from it bit-identically. Ctrl-C and SIGTERM always write one"),
-    }, default={}),
+    }, default={}, check=_check_output),
+    "measure": MEASURE,
     "neighbors": Section({"skin": Float(min=0, min_inclusive=False, default=0.3,
                                         doc="Verlet skin / mean radius")}, default={}),
     "scaling": Section({
@@ -306,11 +333,25 @@ def scene_check(cfg, case, k, scene, report, shapes=None):
             report("", f"{spec.declared_by} (effect {spec.name}) {msg}")
     if cfg.get("output") is not None and cfg.output.get("packing") is not None and set(shapes) == {"mixed"}:
         report("output.packing", "is for sphere, clump and polyhedron scenes, not yet for spheres with polyhedra")
+    _measure_check(cfg, case, shapes, report)
     if set(shapes) <= {"polyhedra", "mixed"}:
         for k, w in enumerate(cfg.get("walls", ())):
             if w.type == "cylinder":
                 report(f"walls.{k}.type", "is not for polyhedra: their wall contact is the overlap with a "
                        "half-space (plane and box walls)", w.type)
+
+
+def _measure_check(cfg, case, shapes, report):
+    """The measures a scene cannot take: none on spheres with polyhedra, no regions or fields
+    (per volume) in 2D."""
+    out = cfg.get("output", {})
+    keys = (("measure", bool(cfg.get("measure")), True), ("output.fields", out.get("fields") is not None, True),
+            ("output.force_chains", bool(out.get("force_chains")), False))
+    for key, on, per_volume in keys:
+        if on and set(shapes) == {"mixed"}:
+            report(key, "is for sphere, clump and polyhedron scenes, not yet for spheres with polyhedra")
+        elif on and per_volume and case.dimension == 2:
+            report(key, "is per volume, for 3D cases (this case is planar)")
 
 
 def stage_effects(cfg, dimension, bonded):

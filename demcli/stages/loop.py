@@ -20,6 +20,7 @@ import numpy as np
 from demcli import interrupts
 from demcli.effects import check_shape
 from demcli.errors import InputError, StageError
+from demcli.measure.stage import StageMeasures
 from demcli.progress import StopForecast
 from demcli.stages.dem import (build_walls, case_materials, contact_model, declared_effects, lay_walls, phase_models,
                                scene_shape, set_bond_models)
@@ -230,11 +231,14 @@ def integrate(ctx, cfg, state_in, hooks=None):
     table, wtable = _tables(ckpt, system, plan, hooks)
     ctable = _contact_table(ckpt, system, cfg.output.get("contacts"))
     ptable = _packing_table(ckpt, cfg.output.get("packing"))
+    measures = StageMeasures.make(ctx, cfg, system, ckpt, plan.has("planar"))
     ended = None if ckpt is None else ckpt.groups["checkpoint"].get("ended")  # the loop had ended: why
     ended = None if ended is None else str(ended)
     snaps = StageSnapshots(ctx.snapshot_dir, system.plugin.name, resume=ckpt is not None)
     if ckpt is not None:  # a checkpoint of the loop's end writes the final snapshot again
         snaps.truncate(system.time if ended is None else math.nextafter(system.time, -math.inf))
+        if measures is not None:
+            measures.truncate(system.time if ended is None else math.nextafter(system.time, -math.inf))
     nb = len(system.mass)
     d_mean = 2.0 * float(body_radii(system).mean())
     g = float(np.linalg.norm(system.gravity))
@@ -250,13 +254,18 @@ def integrate(ctx, cfg, state_in, hooks=None):
                 ctable.append(crow)
         if probe is not None:
             ptable.append(probe.row(system))
+        if measures is not None:
+            measures.record(system)
         return row
 
     def snapshot():
         snaps.write(ctx.state_from(system, plan, extra=None))
+        if measures is not None:
+            measures.snapshot(system)
 
     def checkpoint(ended=None):
-        return _checkpoint(ctx, system, plan, (table, wtable, ctable, ptable), ended)
+        return _checkpoint(ctx, system, plan, (table, wtable, ctable, ptable) +
+                           (tuple(measures.tables) if measures is not None else ()), ended)
 
     stepper = Stepper(ctx, system)
     if ckpt is None:
@@ -328,7 +337,7 @@ def integrate(ctx, cfg, state_in, hooks=None):
     ctx.throughput = rate
     try:
         return _outputs(ctx, system, plan, (table, wtable, ctable, ptable), hooks, snapshot if snap_every else None,
-                        energy)
+                        energy, measures)
     except KeyboardInterrupt:
         with interrupts.deferred(keep=False):
             path = checkpoint(ended=stopped or "")
@@ -474,10 +483,10 @@ def _stop_forecast(cfg, hooks, dt, e_unit, nb):
     return None
 
 
-def _outputs(ctx, system, plan, tables, hooks, snapshot, energy):
+def _outputs(ctx, system, plan, tables, hooks, snapshot, energy, measures=None):
     """The stage's outputs once its stepping has ended: the final snapshot, the state, the
-    record files (``tables``: dem, walls or None, contacts or None, packing or None) and the
-    stage's own (``hooks.finish``)."""
+    record files (``tables``: dem, walls or None, contacts or None, packing or None; the
+    ``measures``' region tables) and the stage's own (``hooks.finish``)."""
     table, wtable, ctable, ptable = tables
     if snapshot is not None:
         snapshot()
@@ -494,6 +503,8 @@ def _outputs(ctx, system, plan, tables, hooks, snapshot, energy):
         ptable.to_state(st)
         ctx.write_records(ptable, x="time", ys=["solid_fraction"])
         ctx.write_records(ptable, x="time", ys=["coordination", "raw_coordination"], suffix="coordination")
+    if measures is not None:
+        measures.write(ctx, st)
     if energy:
         ctx.write_records(table, x="time", ys=["kinetic", "strain", "gravity", "damping", "friction",
                                                 "body_damping", "total"], suffix="energy")
