@@ -71,7 +71,7 @@ N_PARAMS = 11
 _SQRT_5_6 = math.sqrt(5.0 / 6.0)
 
 
-@njit(inline="always")
+@njit(internal=True)
 def _to_tangent_plane(hx, hy, hz, nx, ny, nz):
     """A history vector turned into the current tangent plane, magnitude kept (the contact
     frame rotated since the last step; as in LIGGGHTS/LAMMPS granular history)."""

@@ -53,7 +53,7 @@ ADAPT_DOWN = 0.99    # R > 0.5
 ADAPT_TARGET = 0.5
 
 
-@njit(inline="always")
+@njit(internal=True)
 def omega_from_L(qw, qx, qy, qz, lx, ly, lz, i0, i1, i2):
     """World angular velocity from world angular momentum and principal inertia."""
     bx, by, bz = quat.rotate_inv(qw, qx, qy, qz, lx, ly, lz)
@@ -166,7 +166,7 @@ def rotors(spin, L):
     return choose(spin, L, None)
 
 
-@njit(inline="always")
+@njit(internal=True)
 def damping_factors(alpha, h):
     """(c1, c2) of a half kick of length h with the adaptive alpha: (1 - alpha h/2, 1/(1 + alpha h/2))."""
     a = 0.5 * alpha * h

@@ -307,7 +307,7 @@ def max_row(fs):
     return m
 
 
-@njit(inline="always")
+@njit(internal=True)
 def _shift(first, cosang, tol):
     """Outward shift of a clipping plane (tie rule, see the module docstring): tau
     ramped from 0 at |cos| = PARALLEL_COS to 1 at |cos| = 1; outward for a face of A

@@ -1,7 +1,8 @@
 """Unit-quaternion helpers for rigid-body orientation (scalar first: w, x, y, z).
 
 A quaternion q maps body-frame vectors to the world frame: v_world = q v_body q*.
-All helpers are scalar-level and inlined into the kernels that call them.
+All helpers are scalar-level: plain calls, which LLVM inlines (numba's own inlining would
+enlarge every caller's IR, which its passes then process at each call site).
 """
 
 import math
@@ -9,7 +10,7 @@ import math
 from demcli.jit import njit
 
 
-@njit(inline="always")
+@njit(internal=True)
 def rotate(qw, qx, qy, qz, vx, vy, vz):
     """World vector of body vector v under q (v' = q v q*), via t = 2 q_v x v."""
     tx = 2.0 * (qy * vz - qz * vy)
@@ -20,13 +21,13 @@ def rotate(qw, qx, qy, qz, vx, vy, vz):
             vz + qw * tz + (qx * ty - qy * tx))
 
 
-@njit(inline="always")
+@njit(internal=True)
 def rotate_inv(qw, qx, qy, qz, vx, vy, vz):
     """Body vector of world vector v under q (v' = q* v q)."""
     return rotate(qw, -qx, -qy, -qz, vx, vy, vz)
 
 
-@njit(inline="always")
+@njit(internal=True)
 def mul(aw, ax, ay, az, bw, bx, by, bz):
     """Hamilton product a b."""
     return (aw * bw - ax * bx - ay * by - az * bz,
@@ -35,7 +36,7 @@ def mul(aw, ax, ay, az, bw, bx, by, bz):
             aw * bz + ax * by - ay * bx + az * bw)
 
 
-@njit(inline="always")
+@njit(internal=True)
 def exp_rotation(wx, wy, wz, h):
     """Unit quaternion of the rotation by angle |w| h about w (exponential map)."""
     ang = math.sqrt(wx * wx + wy * wy + wz * wz) * h
@@ -46,7 +47,7 @@ def exp_rotation(wx, wy, wz, h):
     return math.cos(0.5 * ang), s * wx, s * wy, s * wz
 
 
-@njit(inline="always")
+@njit(internal=True)
 def normalize(qw, qx, qy, qz):
     """q / |q|."""
     inv = 1.0 / math.sqrt(qw * qw + qx * qx + qy * qy + qz * qz)
