@@ -115,12 +115,18 @@ def test_uniform_draws_as_before():
                                   np.random.default_rng(6).uniform(1e-3, 1.5e-3, 50))
 
 
-def test_draw_amount_reaches_the_volume_within_one_particle():
+@pytest.mark.parametrize("planar", [False, True])
+def test_draw_amount_reaches_the_amount_within_one_particle_on_the_curve(planar):
+    # Given a sieve curve and a target volume (2D: area) of about 1000 particles
     dist = _dist(distribution="sieve", sieves=[2e-3, 4e-3, 8e-3], passing=[0, 50, 100])
-    target = 1e-4  # m^3
-    r = draw_amount(np.random.default_rng(7), dist, target, planar=False)
-    v = 4 / 3 * math.pi * r ** 3
+    target = 2e-6 if planar else 1e-4  # m^2 or m^3
+    r = draw_amount(np.random.default_rng(7), dist, target, planar=planar)
+    # Then the drawn amount first reaches the target at the last particle
+    v = math.pi * r ** 2 if planar else 4 / 3 * math.pi * r ** 3
     assert v.sum() >= target and v[:-1].sum() < target
+    # and (3D) the stratified draw still follows the curve by mass within 1 point at the middle sieve
+    if not planar:
+        assert sieve_set(2 * r, r ** 3, [4e-3])[0] == pytest.approx(50.0, abs=1.0)
 
 
 # ---------------------------------------------------------------------------------------
@@ -255,3 +261,32 @@ def test_bad_sizes_exit_2_naming_file_line_key(tmp_path, lines, needles):
     assert "Traceback" not in result.output and "case.yaml" in result.output
     for needle in needles:
         assert needle in result.output, (needle, result.output)
+
+
+ADDED = """\
+name: added
+seed: 4
+materials: {glass: {density: 2500 kg/m^3}, steel: {density: 7800 kg/m^3}}
+stages:
+  - {name: base, type: generate, region: {shape: box, min: [0, 0, 0], max: [20 mm, 20 mm, 10 mm]}, count: 12,
+     radius: {min: 1 mm, max: 1 mm}, material: glass}
+  - name: top
+    type: generate
+    add: true
+    region: {shape: box, min: [0, 0, 15 mm], max: [20 mm, 20 mm, 25 mm]}
+    sets:
+      - {material: steel, count: 5, radius: {min: 1 mm, max: 1 mm}}
+      - {material: glass, count: 7, radius: {distribution: discrete, radii: [0.8 mm, 1.2 mm], fractions: [0.5, 0.5],
+         by: number}}
+"""
+
+
+def test_sets_added_to_a_scene_keep_their_set_and_the_old_bodies_get_minus_one(tmp_path):
+    case = tmp_path / "added.yaml"
+    case.write_text(ADDED)
+    run_case(case, out=tmp_path / "run", quiet=True, threads=1)
+    with h5py.File(tmp_path / "run" / "01-top.h5") as f:
+        sets, ids = f["bodies/set"][()], f["bodies/id"][()]
+    # the 12 old bodies (ids 0-11) are of no set, the added ones of sets 0 (5) and 1 (7)
+    assert np.all(sets[ids < 12] == -1)
+    assert np.sum(sets == 0) == 5 and np.sum(sets == 1) == 7

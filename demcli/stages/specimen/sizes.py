@@ -171,16 +171,19 @@ def draw_radii(rng, dist, n):
 
 def draw_amount(rng, dist, target, planar):
     """Radii (m) whose total volume 4/3 pi sum r^3 (m^3; 2D: area pi sum r^2, m^2) first reaches
-    ``target``: batches of doubling size are drawn until their sum passes it, and the list is cut
-    there. The amount so overshoots by less than one particle."""
+    ``target``, overshooting by less than one particle.
+
+    A pilot draw of 4096 radii gives the mean amount per particle, v_mean; then
+    N = ceil(target / v_mean) radii are drawn in one (stratified) draw, topped up while short,
+    and cut where the running sum first reaches the target. One draw of about N keeps a sieve
+    curve's or discrete list's stratification (a cut removes a few particles at random).
+    """
     power, factor = (2, math.pi) if planar else (3, 4.0 / 3.0 * math.pi)
-    drawn, total, batch = [], 0.0, 64
-    while total < target:
-        r = draw_radii(rng, dist, batch)
-        drawn.append(r)
-        total += factor * float(np.sum(r ** power))
-        batch *= 2
-    r = np.concatenate(drawn)
+    each = factor * float(np.mean(draw_radii(rng, dist, 4096) ** power))
+    r = draw_radii(rng, dist, max(1, math.ceil(target / each)))
+    while factor * float(np.sum(r ** power)) < target:
+        short = target - factor * float(np.sum(r ** power))
+        r = np.concatenate([r, draw_radii(rng, dist, max(16, math.ceil(short / each)))])
     n = int(np.searchsorted(np.cumsum(factor * r ** power), target)) + 1
     return r[:min(n, len(r))]
 
