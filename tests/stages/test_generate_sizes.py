@@ -199,8 +199,8 @@ def test_two_sets_counts_fractions_materials_and_no_overlap(tmp_path):
     np.testing.assert_array_equal(s["material"], np.where(sets[s["body"]] == 0, 0, 1))
     one = np.flatnonzero(sets != 2)
     rho = np.where(sets[one] == 0, 2650.0, 1100.0)
-    np.testing.assert_allclose(b["mass"][one], rho * 4 / 3 * math.pi * s["radius"][np.searchsorted(s["body"], one)] ** 3,
-                               rtol=1e-12)
+    r_one = s["radius"][np.searchsorted(s["body"], one)]
+    np.testing.assert_allclose(b["mass"][one], rho * 4 / 3 * math.pi * r_one ** 3, rtol=1e-12)
     # and no two bodies' bounding spheres overlap (the placement's envelope)
     env = np.array([np.max(np.linalg.norm(s["offset"][s["body"] == i], axis=1) + s["radius"][s["body"] == i])
                     for i in range(len(sets))])

@@ -211,7 +211,7 @@ def _assemble(ctx, sets, set_of, radii, rng):
         idx = np.flatnonzero(set_of == j)
         r = radii[idx]
         density = ctx.case.materials[st.material].density
-        sphere["material"][np.repeat(start[idx], k[idx]) + _ranks(k[idx])] = list(ctx.case.materials).index(st.material)
+        sphere["material"][set_of[sphere["body"]] == j] = list(ctx.case.materials).index(st.material)
         if st.clump is None:
             mass[idx], inertia[idx] = _sphere_properties(density, r, planar, ctx.case.thickness)
             sphere["radius"][start[idx]] = r
@@ -228,11 +228,6 @@ def _assemble(ctx, sets, set_of, radii, rng):
             idx = np.flatnonzero(set_of == j)
             q[idx] = _random_quaternions(rng, len(idx))
     return mass, inertia, q, sphere
-
-
-def _ranks(k):
-    """0..k_i-1 for each entry of k, concatenated."""
-    return np.arange(int(k.sum())) - np.repeat(np.cumsum(k) - k, k)
 
 
 def _place(ctx, cfg, env, planar):
@@ -282,7 +277,8 @@ def run(ctx, cfg, state_in):
         r = radii[set_of == j]
         kind = "clumps" if st.clump is not None else "spheres"
         label = f"set {j}: " if cfg.sets is not None else ""
-        ctx.log(f"generated {label}{len(r)} {kind} of {st.material} (radius {r.min() * 1e3:.3g}-{r.max() * 1e3:.3g} mm, "
+        span = f"{r.min() * 1e3:.3g}-{r.max() * 1e3:.3g} mm"
+        ctx.log(f"generated {label}{len(r)} {kind} of {st.material} (radius {span}, "
                 f"{cfg.placement} placement)" + (", added to the scene" if cfg.add else ""))
     return scene_or_added(ctx, cfg, state_in, bodies, sphere)
 
