@@ -221,6 +221,11 @@ def test_graded_smoke_case_runs_through_the_cli(tmp_path):
     # Then both sets are there after the DEM stage, each with its own material
     assert set(np.unique(sets)) == {0, 1}
     assert set(mat[sets[body] == 0]) == {0} and set(mat[sets[body] == 1]) == {1}
+    # and the last snapshot shows each sphere's set beside its material
+    import meshio
+
+    snap = meshio.read(sorted((tmp_path / "settle").glob("spheres_*.vtu"))[-1])
+    np.testing.assert_array_equal(snap.point_data["set"], sets[body])
 
 
 # ---------------------------------------------------------------------------------------
