@@ -10,23 +10,34 @@ import math
 import numpy as np
 
 
+def _set_estimate(case, st):
+    """(radius, mass, material index, clump) of the smallest particle of one generate set."""
+    from demcli.stages.specimen.sizes import radius_range
+
+    r = radius_range(st.radius)[0]
+    rho = case.materials[st.material].density
+    if case.dimension == 2:
+        m = rho * case.thickness * math.pi * r * r
+    else:
+        m = rho * 4.0 / 3.0 * math.pi * r ** 3
+    if st.clump is not None:
+        t = np.array(st.clump.spheres, float)
+        m *= float((t[:, 3] ** 3).sum())
+        r *= float(t[:, 3].min())
+    return r, m, list(case.materials).index(st.material), st.clump is not None
+
+
 def _scene_estimate(case, k):
-    """(radius, mass, material index, clumps) of the smallest particle generated before stage k."""
-    names = list(case.materials)
+    """(radius, mass, material index, clumps) of the smallest particle generated before stage k
+    (of several sets: the smallest sphere, and whether any set is of clumps)."""
+    from demcli.stages.specimen.generate import particle_sets
+
     for cfg in reversed(case.stages[:k]):
         if cfg.type != "generate":
             continue
-        r = cfg.radius.min
-        rho = case.materials[cfg.material].density
-        if case.dimension == 2:
-            m = rho * case.thickness * math.pi * r * r
-        else:
-            m = rho * 4.0 / 3.0 * math.pi * r ** 3
-        if cfg.clump is not None:
-            t = np.array(cfg.clump.spheres, float)
-            m *= float((t[:, 3] ** 3).sum())
-            r *= float(t[:, 3].min())
-        return r, m, names.index(cfg.material), cfg.clump is not None
+        each = [_set_estimate(case, st) for st in particle_sets(cfg)]
+        r, m, mat, _ = min(each, key=lambda e: e[0])
+        return r, m, mat, any(e[3] for e in each)
     return None
 
 

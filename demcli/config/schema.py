@@ -818,11 +818,14 @@ class Tagged(Field):
 
     ``Tagged("type", {"hertz": Section({...}), "hooke": Section({...})})``; the tag is
     kept in the resulting Node. Variants may be given as plain dicts of fields.
+    ``default_tag``: the variant of a mapping without the tag key (a form that predates the
+    tag stays valid); None makes the tag key required.
     """
 
-    def __init__(self, tag_key, variants, default=REQUIRED, doc=""):
+    def __init__(self, tag_key, variants, default=REQUIRED, doc="", default_tag=None):
         super().__init__(default, doc)
         self.tag_key = tag_key
+        self.default_tag = default_tag
         self.variants = {}
         for tag, section in variants.items():
             if isinstance(section, Mapping):
@@ -838,6 +841,9 @@ class Tagged(Field):
         if not isinstance(value, Mapping):
             ctx.error(path, f"must be a mapping with a {self.tag_key!r} key", value)
             return _INVALID
+        if self.tag_key not in value and self.default_tag is not None:
+            return self.variants[self.default_tag].validate_mapping(
+                value, path, ctx, skip=(self.tag_key,), first={self.tag_key: self.default_tag})
         if self.tag_key not in value:
             ctx.error(path + (self.tag_key,), "required key is missing",
                       hint=f"one of {_one_of(self.variants)}")

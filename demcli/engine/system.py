@@ -194,6 +194,7 @@ class System:
         self.f = np.ascontiguousarray(b.get("force", np.zeros((nb, 3))), np.float64).copy()
         self.tq = np.ascontiguousarray(b.get("torque", np.zeros((nb, 3))), np.float64).copy()
         self._angmom = b.get("angmom")
+        self.body_set = None if b.get("set") is None else np.asarray(b["set"], np.int64)  # generate's sets
         self._setup_walls(walls)
         self.plugin = shape_plugin(groups)(self, groups)
         n_prim = len(self.rad)
@@ -424,6 +425,8 @@ class System:
                   "torque": self.tq.copy()}
         if self.rigid:
             bodies["angmom"] = self.L / self.mass_scale
+        if self.body_set is not None:
+            bodies["set"] = self.body_set.copy()
         w = self.walls
         walls = {"name": np.array(w.name, dtype=object), "kind": w.kind.copy(), "point": self.wpoint.copy(),
                  "normal": w.normal.copy(), "radius": w.radius.copy(), "v": self.wv.copy(),

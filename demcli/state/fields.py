@@ -202,6 +202,8 @@ _reg("bodies", "flags", "i", ("n_b",), "", "bit 0: fixed translation, bit 1: fix
 _reg("bodies", "force", "f", ("n_b", 3), "N", "total force at the last step (first half kick of the next)",
      required=False, finite=True)
 _reg("bodies", "torque", "f", ("n_b", 3), "N m", "total torque at the last step", required=False, finite=True)
+_reg("bodies", "set", "i", ("n_b",), "", "particle set of the generate stage's sets: list (0, 1, ...; -1: none)",
+     required=False, writer="stage generate")
 _reg("bodies", "angmom", "f", ("n_b", 3), "kg m^2/s", "angular momentum, world frame (clumps)",
      required=False, writer="effect clumps", finite=True)
 

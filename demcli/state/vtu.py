@@ -1,7 +1,8 @@
 """VTU snapshots and PVD series for ParaView (for viewing only, never read back as state).
 
 Spheres become vertex cells at their world centres with point data ``radius``,
-``diameter``, ``velocity``, ``speed``, ``omega``, ``body_id`` and ``material``; in
+``diameter``, ``velocity``, ``speed``, ``omega``, ``body_id``, ``material`` and, for the
+particle sets of a ``generate`` stage, ``set``; in
 ParaView apply *Glyph* (Sphere, scale by ``diameter``, scale factor 1). Walls become a
 quad surface: planes clipped to their ``extent`` box, cylinders as a 48-sided tube
 spanning the extent along the axis, with cell data ``wall``, ``kind``, ``control``,
@@ -49,6 +50,8 @@ def sphere_mesh(state) -> meshio.Mesh:
         "body_id": np.asarray(state["bodies/id"], dtype=np.int64)[body],
         "material": np.asarray(state["spheres/material"], dtype=np.int64),
     }
+    if state.get("bodies/set") is not None:
+        point_data["set"] = np.asarray(state["bodies/set"], dtype=np.int64)[body]
     cells = [("vertex", np.arange(n_s, dtype=np.int64).reshape(-1, 1))]
     return meshio.Mesh(state.sphere_centres(), cells, point_data=point_data)
 

@@ -149,11 +149,12 @@ FIELDS = {
 }
 
 
-def _check(node, report):
-    s, q = node.sieves, node.passing
+def check_curve(s, q, report):
+    """Report a sieve curve's faults (sieves ``s`` ascending, m; passing ``q`` non-decreasing, %,
+    one per sieve) at the keys ``sieves.<k>`` and ``passing.<k>``; False when the lengths differ."""
     if len(s) != len(q):
         report("passing", f"needs one value per sieve ({len(s)})", len(q))
-        return
+        return False
     for k in range(1, len(s)):
         if s[k] == s[k - 1]:
             report(f"sieves.{k}", "empty class: two sieves of the same size", s[k])
@@ -161,6 +162,13 @@ def _check(node, report):
             report(f"sieves.{k}", f"sizes must ascend (after {s[k - 1]:g} m)", s[k])
         if q[k] < q[k - 1]:
             report(f"passing.{k}", f"passing must not decrease with size (after {q[k - 1]:g} %)", q[k])
+    return True
+
+
+def _check(node, report):
+    s, q = node.sieves, node.passing
+    if not check_curve(s, q, report):
+        return
     v = node.volumetrics
     if v.kind == "asphalt":
         if v.min_size not in s:

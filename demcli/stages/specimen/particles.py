@@ -149,7 +149,8 @@ def sphere_bodies(p, density, planar, thickness):
 def add_to_scene(ctx, state_in, bodies, spheres):
     """A state of the input's groups with ``bodies`` and their ``spheres`` appended: ids after the
     input's largest, sphere body indices shifted, per-body fields the new bodies lack (force,
-    torque, angular momentum) zero (a sphere's L = I omega)."""
+    torque, angular momentum) zero (a sphere's L = I omega), and ``set`` -1 for the bodies of
+    either side that came from no ``sets:`` list."""
     from demcli.errors import StageError
 
     for group in ("polyhedra", "actors"):
@@ -161,6 +162,9 @@ def add_to_scene(ctx, state_in, bodies, spheres):
     bodies = dict(bodies, id=bodies["id"] + (int(np.max(old_b["id"])) + 1 if nb0 else 0))
     if "angmom" in old_b:
         bodies["angmom"] = bodies["inertia"] * bodies["omega"]
+    if "set" in bodies or "set" in old_b:  # bodies of no generate sets: list are set -1
+        old_b = dict(old_b, set=old_b.get("set", np.full(nb0, -1, np.int64)))
+        bodies = dict(bodies, set=bodies.get("set", np.full(len(bodies["x"]), -1, np.int64)))
     merged_b = {}
     for key, arr in old_b.items():
         new = bodies.get(key, np.zeros((len(bodies["x"]),) + np.shape(arr)[1:], np.asarray(arr).dtype))
