@@ -93,6 +93,9 @@ def compare(runs, record, x, ys, out, earlier):
               help="Column of records/<stage>_<table>.csv, reduced by @last (default), @first, @max, @min or @mean.")
 @click.option("--reference", default="last", show_default=True, metavar="last|first|VARIANT",
               help="The finest variant: each --vary's last or first value, or a variant's folder name.")
+@click.option("--realisations", metavar="PATH=V1,V2,...",
+              help="Run every setting once per value (e.g. seed=1,2,3) and report each setting's mean, standard "
+                   "deviation and the resolution of its difference from the reference (settings.csv, .png).")
 @click.option("--set", "overrides", multiple=True, metavar="PATH=VALUE",
               help="In every variant: " + SET_HELP[0].lower() + SET_HELP[1:])
 @click.option("--out", type=click.Path(file_okay=False), help="Study folder (default studies/<case name>).")
@@ -103,7 +106,7 @@ def compare(runs, record, x, ys, out, earlier):
 @click.option("--force", is_flag=True, help="Re-run variants that are up to date.")
 @click.option("--cold", is_flag=True, help="Time each run as it comes, numba's first-call kernel loading included.")
 @click.option("--quiet", is_flag=True, help="No progress lines; the table is still printed.")
-def study(case, varies, metric, reference, overrides, out, jobs, threads_per_job, force, cold, quiet):
+def study(case, varies, metric, reference, realisations, overrides, out, jobs, threads_per_job, force, cold, quiet):
     """Run CASE once per variant and report metric, error and wall time (CSV, Markdown, PNG)."""
     from demcli.interrupts import stop_as_interrupt
     from demcli.study import run_study
@@ -112,7 +115,7 @@ def study(case, varies, metric, reference, overrides, out, jobs, threads_per_job
 
     result = run_study(case, varies, metric, out=out, jobs=jobs, threads_per_job=threads_per_job,
                        reference=reference, overrides=overrides, force=force, cold=cold,
-                       log=None if quiet else (lambda line: click.echo(line, err=True)))
+                       log=None if quiet else (lambda line: click.echo(line, err=True)), realisations=realisations)
     click.echo(result.markdown, nl=False)
     if not quiet:
         for path in result.files:

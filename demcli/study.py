@@ -35,12 +35,13 @@ from pathlib import Path
 
 import numpy as np
 
+from demcli import study_stats
 from demcli.errors import ConfigError, DemcliError, InputError, StageError
 from demcli.state.atomic import atomic_path, atomic_write_text
 
 __all__ = ["Vary", "Variant", "Metric", "parse_vary", "make_variants", "parse_metric", "check_metric_stage",
            "reduce_column", "read_metric", "pick_reference", "error_table", "validate_variants", "write_csv",
-           "markdown_table", "write_plot", "run_study", "StudyResult"]
+           "parse_realisations", "markdown_table", "write_plot", "run_study", "StudyResult"]
 
 REDUCERS = ("last", "first", "max", "min", "mean")
 MANIFEST = "study.json"
@@ -64,6 +65,7 @@ class Vary:
     label: str = ""  # short name in tables and folder names (the path's last segments)
     along: bool = False
     group: int = 0
+    realisation: bool = False  # the runs along this path are realisations of one setting (--realisations)
 
 
 @dataclass(frozen=True)
@@ -157,7 +159,8 @@ def make_variants(varies):
         if v.along and len(v.values) != len(head.values):
             raise InputError(f"--vary +{v.path}: {len(v.values)} values to pair with the {len(head.values)} of "
                              f"--vary {head.path}; a + path needs one value per value of the path it joins")
-    varies = [Vary(v.path, v.values, lab, v.along, g) for v, lab, g in zip(varies, _labels(paths), groups)]
+    varies = [Vary(v.path, v.values, lab, v.along, g, v.realisation)
+              for v, lab, g in zip(varies, _labels(paths), groups)]
     for v in varies:
         slugs = {}
         for value in v.values:
@@ -202,13 +205,19 @@ def validate_variants(case, varies, variants, overrides=()):
 
 def pick_reference(varies, variants, spec="last"):
     """Index of the reference (finest) variant: ``last`` (each --vary's last value),
-    ``first``, or a variant's name (its folder name, e.g. ``dt_factor=0.1``)."""
+    ``first``, or a variant's name (its folder name, e.g. ``dt_factor=0.1``; with realisations
+    also the setting's name, the folder name without its realisation part)."""
     spec = (spec or "last").strip()
     if spec in ("last", "first"):
         want = tuple(v.values[-1 if spec == "last" else 0] for v in varies)
         return next(i for i, var in enumerate(variants) if var.values == want)
+    real = varies[-1].realisation and len(varies) > 1  # a setting's name: the slug without its realisation
+
+    def setting(slug):
+        return slug.rpartition(",")[0] if real else slug
+
     for i, var in enumerate(variants):
-        if var.slug == spec or var.slug.replace(" ", "") == spec.replace(" ", ""):
+        if spec.replace(" ", "") in (var.slug.replace(" ", ""), setting(var.slug).replace(" ", "")):
             return i
     names = [v.slug for v in variants]
     shown = ", ".join(names[:12]) + (", ..." if len(names) > 12 else "")
@@ -448,6 +457,8 @@ class StudyResult:
     out: Path
     files: list = field(default_factory=list)
     markdown: str = ""
+    settings: list = field(default_factory=list)  # with realisations: one study_stats.Setting per setting
+    setting_reference: int = 0
 
     @property
     def failed(self):
@@ -455,7 +466,7 @@ class StudyResult:
 
 
 def run_study(case, varies, metric, out=None, jobs=None, threads_per_job=1, reference="last", overrides=(),
-              force=False, cold=False, log=None):
+              force=False, cold=False, log=None, realisations=None):
     """Run a study; returns a :class:`StudyResult` (reports written under ``out``).
 
     Args:
@@ -470,6 +481,9 @@ def run_study(case, varies, metric, out=None, jobs=None, threads_per_job=1, refe
         force: re-run variants whose stages are up to date.
         cold: report each run's time as it comes, first-call kernel loading included.
         log: ``log(text)`` for one line per finished variant (None: silent).
+        realisations: ``path=v1,v2,...`` (e.g. ``seed=1,2,3``): every setting is run once per value and
+            reported as mean and spread over them (:mod:`demcli.study_stats`); errors are then taken
+            against the reference setting's mean.
 
     Raises InputError (exit 2) for a bad --vary, --metric or --reference, or any variant
     that fails validation, all before anything runs; StageError (exit 1) when the
@@ -477,6 +491,8 @@ def run_study(case, varies, metric, out=None, jobs=None, threads_per_job=1, refe
     """
     log = log or (lambda text: None)
     varies = [v if isinstance(v, Vary) else parse_vary(v) for v in varies]
+    if realisations is not None:
+        varies.append(parse_realisations(realisations))
     metric = metric if isinstance(metric, Metric) else parse_metric(metric)
     varies, variants = make_variants(varies)
     fixed = list(overrides)
@@ -536,19 +552,51 @@ def run_study(case, varies, metric, out=None, jobs=None, threads_per_job=1, refe
         atomic_write_text(manifest_path, json.dumps(manifest, indent=1, sort_keys=True) + "\n")
 
     ordered = [rows[v.slug] for v in variants]
-    for row, (err, rel) in zip(ordered, error_table([r.metric for r in ordered], ref)):
-        row.error, row.rel_error = err, rel
     result = StudyResult(str(case), metric, unit[0], varies, ordered, ref, out)
+    values = [r.metric for r in ordered]
+    if any(v.realisation for v in varies):
+        result.settings, result.setting_reference = study_stats.aggregate(varies, ordered, ref)
+        errors = error_table(values + [result.settings[result.setting_reference].mean], len(values))[:-1]
+    else:
+        errors = error_table(values, ref)
+    for row, (err, rel) in zip(ordered, errors):
+        row.error, row.rel_error = err, rel
     result.markdown = markdown_table(result)
-    atomic_write_text(out / "study.md", result.markdown)
     write_csv(out / "study.csv", result)
     result.files = [out / "study.csv", out / "study.md"]
     if write_plot(out / "study.png", result):
         result.files.append(out / "study.png")
+    if result.settings:
+        result.files += _write_settings(result)
+    atomic_write_text(out / "study.md", result.markdown)
     if ordered[ref].status.startswith("failed"):
         raise StageError(f"the reference variant {ordered[ref].variant.slug} failed, so there are no errors to "
                          f"report: {ordered[ref].status[len('failed: '):]}\n  table: {out / 'study.md'}")
     return result
+
+
+def parse_realisations(text):
+    """The realisation axis of ``--realisations path=v1,v2,...``: a :class:`Vary` flagged
+    ``realisation``; InputError unless it has two values or more and no leading +."""
+    vary = parse_vary(text)
+    if vary.along:
+        raise InputError(f"--realisations {text}: the realisations are their own axis; drop the +")
+    if len(vary.values) < 2:
+        raise InputError(f"--realisations {text}: give two values or more (e.g. seed=1,2,3): one run shows "
+                         "no scatter")
+    return Vary(vary.path, vary.values, realisation=True)
+
+
+def _write_settings(result):
+    """settings.csv and settings.png of a study with realisations; the settings table joins the Markdown."""
+    name = f"{result.metric.column}@{result.metric.reducer}"
+    args = (result.varies, result.settings, result.setting_reference, name, result.unit)
+    files = [study_stats.write_settings_csv(result.out / "settings.csv", *args)]
+    result.markdown += "\n" + study_stats.settings_markdown(*args)
+    if study_stats.write_settings_plot(result.out / "settings.png", result.case, result.varies, result.settings,
+                                       name, result.unit):
+        files.append(result.out / "settings.png")
+    return files
 
 
 def _read_manifest(path):
@@ -586,7 +634,7 @@ def write_csv(path, result):
                 _header("error", result.unit), "rel_error", "wall_time[s]", "status"])
     for k, row in enumerate(result.rows):
         w.writerow([row.variant.slug, *row.variant.values, *(_num(x, "r") for x in (row.metric, row.error,
-                    row.rel_error, row.wall_time)), row.status + (" (reference)" if k == result.reference else "")])
+                    row.rel_error, row.wall_time)), row.status + (" (reference)" if k == result.reference and not result.settings else "")])
     atomic_write_text(path, buf.getvalue())
     return Path(path)
 
@@ -596,8 +644,10 @@ def markdown_table(result):
     m = result.metric
     unit = f" [{result.unit}]" if result.unit else ""
     ref = result.rows[result.reference].variant
-    lines = [f"Study of `{result.case}`: `{m.text}` (records/{m.record}.csv){unit}; "
-             f"error against the reference `{ref.slug}`.", ""]
+    against = (f"the mean of the reference setting's realisations (`{ref.slug}` and its other "
+               f"{next(v.label for v in result.varies if v.realisation)})") if result.settings else \
+        f"the reference `{ref.slug}`"
+    lines = [f"Study of `{result.case}`: `{m.text}` (records/{m.record}.csv){unit}; error against {against}.", ""]
     show_status = any(r.status != "ran" for r in result.rows)
     head = [*(v.label for v in result.varies), f"{m.column}@{m.reducer}{unit}", f"error{unit}", "rel. error",
             "wall time [s]"] + (["status"] if show_status else [])
@@ -605,7 +655,7 @@ def markdown_table(result):
     lines.append("|" + "---:|" * (len(head) - show_status) + ":---|" * show_status)
     for k, row in enumerate(result.rows):
         values = list(row.variant.values)
-        if k == result.reference:
+        if k == result.reference and not result.settings:  # with realisations: the setting's mean is
             values[-1] += " (reference)"
         cells = [*values, _num(row.metric, ".6g"), _num(row.error, ".3g"), _num(row.rel_error, ".2e"),
                  _num(row.wall_time, ".2f")] + ([row.status] if show_status else [])

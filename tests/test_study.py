@@ -14,8 +14,9 @@ from click.testing import CliRunner
 
 from demcli.cli import cli
 from demcli.errors import InputError
-from demcli.study import (Metric, error_table, make_variants, parse_metric, parse_vary, pick_reference,
-                          read_metric, reduce_column, split_values, validate_variants, check_metric_stage)
+from demcli.study import (Metric, error_table, make_variants, parse_metric, parse_realisations, parse_vary,
+                          pick_reference, read_metric, reduce_column, split_values, validate_variants,
+                          check_metric_stage)
 
 CASES = Path(__file__).resolve().parent.parent / "cases"
 IMPACT = CASES / "studies" / "timestep_impact.yaml"
@@ -382,3 +383,77 @@ def test_sigterm_stops_a_parallel_study_and_its_workers(tmp_path, wait_for_files
     while [p for p in workers if _alive(p)] and time.monotonic() < deadline:
         time.sleep(0.1)
     assert not [p for p in workers if _alive(p)]
+
+
+# ---- realisations ------------------------------------------------------------------------
+
+def _synthetic(metrics_by_setting, real_values=("1", "2", "3")):
+    """Rows of a study over dt_factor with seed realisations, metrics given per setting."""
+    from demcli.study import Row
+
+    varies, variants = make_variants([parse_vary("stages.s.time.dt_factor=" + ",".join(metrics_by_setting)),
+                                      parse_realisations("seed=" + ",".join(real_values))])
+    rows = []
+    for var in variants:
+        k = real_values.index(var.values[-1])
+        rows.append(Row(var, metric=metrics_by_setting[var.values[0]][k], wall_time=float(k + 1)))
+    return varies, variants, rows
+
+
+def test_realisations_reduce_to_mean_spread_and_resolution():
+    from demcli.study_stats import aggregate
+
+    # Given two settings with three realisations each
+    varies, variants, rows = _synthetic({"0.2": [1.0, 2.0, 3.0], "0.1": [5.0, 5.5, 6.0]})
+    assert [v.slug for v in variants[:2]] == ["dt_factor=0.2,seed=1", "dt_factor=0.2,seed=2"]
+    # When they are aggregated against the last setting
+    settings, ref = aggregate(varies, rows, pick_reference(varies, variants, "last"))
+    # Then each setting has the sample statistics of its runs
+    assert ref == 1 and [s.values for s in settings] == [("0.2",), ("0.1",)]
+    a, b = settings
+    assert (a.n, a.mean, a.std) == (3, 2.0, 1.0) and a.sem == pytest.approx(1 / math.sqrt(3), rel=1e-15)
+    assert (b.mean, b.std) == (5.5, 0.5) and a.wall_time == 2.0
+    # and the error of the mean in units of the combined standard error: 3.5 / sqrt(1/3 + 1/12)
+    assert a.error == -3.5 and a.resolution == pytest.approx(3.5 / math.sqrt(1 / 3 + 0.25 / 3), rel=1e-14)
+    assert math.isnan(b.resolution) and b.error == 0.0
+
+
+def test_a_failed_realisation_is_left_out_of_its_setting():
+    from demcli.study_stats import aggregate, settings_markdown
+
+    varies, variants, rows = _synthetic({"0.2": [1.0, math.nan, 3.0], "0.1": [5.0, 5.5, 6.0]})
+    settings, ref = aggregate(varies, rows, len(rows) - 1)
+    assert (settings[0].n, settings[0].runs, settings[0].mean) == (2, 3, 2.0)
+    assert "| 0.2 | 2 of 3 | 2 |" in settings_markdown(varies, settings, ref, "x@last", "m")
+
+
+def test_a_setting_name_picks_the_reference_of_a_study_with_realisations():
+    varies, variants, _ = _synthetic({"0.2": [1, 2, 3], "0.1": [1, 2, 3]})
+    assert variants[pick_reference(varies, variants, "dt_factor=0.2")].values[0] == "0.2"
+
+
+@pytest.mark.parametrize("text, needle", [("seed=1", "two values or more"), ("+seed=1,2", "drop the +")])
+def test_bad_realisations_are_named(text, needle):
+    with pytest.raises(InputError, match=needle):
+        parse_realisations(text)
+
+
+def test_a_study_with_realisations_reports_each_setting(tmp_path):
+    # Given realisations whose metric is known: the duration, so time@last = 1e-4 s or 1.2e-4 s
+    result = _invoke(["study", IMPACT, *TINY, "--vary", f"{DT}=0.4,0.2", "--realisations",
+                      "stages.impact.time.duration=1e-4 s,1.2e-4 s", "--metric", "impact.dem.time@last",
+                      "--out", tmp_path, "--jobs", "1", "--quiet"])
+    assert result.exit_code == 0, result.output
+    # Then four runs are reduced to two settings of mean 1.1e-4 s and standard deviation sqrt(2) 1e-5 s
+    settings = _rows(tmp_path / "settings.csv")
+    assert [s["dt_factor"] for s in settings] == ["0.4", "0.2"] and settings[1]["reference"] == "yes"
+    for s in settings:
+        assert s["n"] == "2" and float(s["time@last_mean[s]"]) == pytest.approx(1.1e-4, rel=0.02)
+        assert float(s["std[s]"]) == pytest.approx(math.sqrt(2) * 1e-5, rel=0.1)
+    assert (tmp_path / "settings.png").stat().st_size > 0
+    assert "Realisations: `stages.impact.time.duration`" in result.output
+    # and each run's error is taken against the reference setting's mean
+    runs = _rows(tmp_path / "study.csv")
+    ref_mean = float(settings[1]["time@last_mean[s]"])
+    for r in runs:
+        assert float(r["error[s]"]) == pytest.approx(float(r["time@last[s]"]) - ref_mean, abs=1e-18)
