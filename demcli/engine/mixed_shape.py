@@ -24,6 +24,7 @@ from demcli.engine.poly_shape import BOUND_PAD, PolyShape, poly_pair_table, shap
 from demcli.engine.sphere_shape import SphereShape, _empty2, contacts_tuple, stored_contacts
 from demcli.kernels import layout as K
 from demcli.kernels.bonds import N_BTABLE
+from demcli.kernels.contact import P_MU
 from demcli.kernels.walls import PLANE
 
 
@@ -59,6 +60,7 @@ class MixedShape:
 
     name = "mixed"
     MUTABLE = ("xs", "vs", "ws", "fs", "ts")
+    FRICTION = P_MU  # column of prm with the friction between spheres (the bed's pairs; qprm has the actors')
 
     def __init__(self, s, groups):
         if len(s.walls) and np.any(np.asarray(s.walls.kind) != PLANE):

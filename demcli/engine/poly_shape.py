@@ -26,6 +26,7 @@ from demcli.engine.materials import damping_ratio
 from demcli.engine.sphere_shape import _empty2, contacts_tuple, stored_contacts
 from demcli.kernels import layout as K
 from demcli.kernels.bonds import N_BTABLE
+from demcli.kernels.shapes.polyhedra import Q_MU
 from demcli.kernels.walls import PLANE
 
 # bounding radius = template circumradius x (1 + BOUND_PAD): round-off of the world transform
@@ -193,6 +194,7 @@ class PolyShape:
 
     name = "polyhedra"
     MUTABLE = ()
+    FRICTION = Q_MU  # column of prm with the friction coefficient
 
     def __init__(self, s, groups):
         if len(s.walls) and np.any(np.asarray(s.walls.kind) != PLANE):

@@ -14,6 +14,7 @@ import numpy as np
 
 from demcli.engine.materials import LAWS, critical_time_step, pair_table
 from demcli.kernels import layout as K
+from demcli.kernels.contact import P_MU
 
 _EMPTY_I = np.empty(0, np.int64)
 
@@ -67,6 +68,7 @@ class SphereShape:
 
     name = "spheres"
     MUTABLE = ("xs", "vs", "ws", "fs", "ts")  # what the step loop changes besides the System's arrays
+    FRICTION = P_MU  # column of prm with the friction coefficient
 
     def __init__(self, s, groups):
         from demcli.engine.bonds import BondSet

@@ -455,6 +455,12 @@ class System:
         self._spheres_only("bonding")
         return self.plugin.bond_touching(self, gap, fraction, rng, stress_free)
 
+    @property
+    def friction(self):
+        """(n_m, n_m) view of the friction coefficients between particle materials in the pair table;
+        writable: a change acts from the next step."""
+        return self.prm[:, :, self.plugin.FRICTION]
+
     def stress(self, volume):
         """Mean stress in the particles [Pa], (3, 3), compression positive: the contact and
         bond virial over ``volume`` [m^3] (:func:`demcli.kernels.measures.contact_virial`)."""

@@ -123,6 +123,14 @@ def _check_cyclic(node, report):
     _check_box(node, report)
     if node.load.max < node.load.min:
         report("load.max", f"must be >= load.min ({node.load.min:g} N)", node.load.max)
+    aid = node.get("densify")
+    if aid is not None:
+        if node.target_density is None:
+            report("densify", "densifies to target_density: give target_density too", None)
+        if aid.after >= node.cycles:
+            report("densify.after", f"must be below cycles ({node.cycles}), or the aid never starts", aid.after)
+        if not node.physics.get("friction", True):
+            report("densify", "lowers the friction, and physics.friction is off", None)
 
 
 # ---------------------------------------------------------------------------------------
@@ -143,23 +151,34 @@ def particles(groups):
     return np.arange(n)
 
 
-def particle_mass(groups, case):
-    """(mass [kg], mass-weighted particle density [kg/m^3]) of the ballast particles."""
+def _polyhedral_bed(groups):
+    return not len(groups.get("spheres", {}).get("radius", ()))
+
+
+def particle_materials(groups):
+    """Material index of each ballast particle (a clump: its spheres' material)."""
     idx = particles(groups)
-    density = np.array([m.density for m in case.materials.values()])
-    if not len(groups.get("spheres", {}).get("radius", ())):  # polyhedra: volume x density
-        vol = np.asarray(groups["polyhedron_shapes"]["volume"])[np.asarray(groups["polyhedra"]["shape"])[idx]]
-        dens = density[np.asarray(groups["polyhedra"]["material"])[idx]]
-        m = float((vol * dens).sum())
-        return m, m / float(vol.sum()) if len(idx) else 0.0
-    # spheres and clumps: the bodies' mass (a clump keeps its polyhedron's, V rho), the
-    # density of their spheres' material
+    if _polyhedral_bed(groups):
+        return np.asarray(groups["polyhedra"]["material"], np.int64)[idx]
     sp = groups["spheres"]
     mat = np.zeros(len(groups["bodies"]["mass"]), np.int64)
     mat[np.asarray(sp["body"], np.int64)] = np.asarray(sp["material"], np.int64)
+    return mat[idx]
+
+
+def particle_mass(groups, case):
+    """(mass [kg], mass-weighted particle density [kg/m^3]) of the ballast particles."""
+    idx = particles(groups)
+    density = np.array([m.density for m in case.materials.values()])[particle_materials(groups)]
+    if _polyhedral_bed(groups):  # polyhedra: volume x density
+        vol = np.asarray(groups["polyhedron_shapes"]["volume"])[np.asarray(groups["polyhedra"]["shape"])[idx]]
+        m = float((vol * density).sum())
+        return m, m / float(vol.sum()) if len(idx) else 0.0
+    # spheres and clumps: the bodies' mass (a clump keeps its polyhedron's, V rho), the
+    # density of their spheres' material
     mass = np.asarray(groups["bodies"]["mass"], float)[idx]
     m = float(mass.sum())
-    return m, m / float((mass / density[mat[idx]]).sum()) if len(idx) else 0.0
+    return m, m / float((mass / density).sum()) if len(idx) else 0.0
 
 
 def bed_measures(mass, rho_s, area, height):
@@ -311,9 +330,11 @@ def cycle_timing(load, cycles, records_per_cycle, dt):
     return dt, settle + cycles * spc, spc // rec
 
 
-def _cyclic(ctx, cfg, state_in, actor, measure, columns, stop=None, finish_extra=None, target=None):
+def _cyclic(ctx, cfg, state_in, actor, measure, columns, stop=None, finish_extra=None, target=None, start=None):
     """Run a cyclic stage on the dem loop: ``measure(system) -> dict`` of ``columns`` at each
-    record, plus ``cycle``; the rows at whole cycles go to the ``cycles`` record."""
+    record, plus ``cycle``; the rows at whole cycles go to the ``cycles`` record. ``stop(row)``
+    at each whole cycle from the first (a reason ends the stage); ``start(system, checkpoint,
+    cycle)`` once before the first step, with the cycle the stage (re)starts at."""
     from demcli.engine.actors import actor_index
     from demcli.state import RecordTable
 
@@ -379,7 +400,8 @@ def _cyclic(ctx, cfg, state_in, actor, measure, columns, stop=None, finish_extra
         return r[target[0]] if is_cycle_end(r) and round(r["cycle"]) >= 1 else None
 
     hooks = loop.Hooks(columns={"cycle": "1", **columns}, row=row, stop=stop_hook, finish=finish, timing=timing,
-                      watch=watch if target is not None else None, target=target and target[1:])
+                      watch=watch if target is not None else None, target=target and target[1:],
+                      start=None if start is None else (lambda system, ckpt: start(system, ckpt, cycle_of(system))))
     dcfg = dict(cfg)
     dcfg["time"] = Node({"steps": 1, "duration": None, "dt": cfg.time.dt, "dt_factor": cfg.time.dt_factor})
     dcfg["stop"] = None
@@ -429,15 +451,18 @@ def run_vibrate(ctx, cfg, state_in):
                        mats.index(p.material), "plate", load=_load_row(cfg.load, cfg.load.settle))
     b = actor_index(groups, "plate")
     half = 0.5 * size[2]
+    aid = FrictionAid(cfg.densify, np.unique(particle_materials(groups)), cfg.target_density)
 
     def measure(system):
         h = float(system.x[b, 2]) - half - lo[2]
         m = bed_measures(mass, rho_s, area, h)
-        return {"plate": float(system.x[b, 2]), **{k: m[k] for k in ("bulk_density", "porosity", "void_ratio")}}
+        return {"plate": float(system.x[b, 2]), **{k: m[k] for k in ("bulk_density", "porosity", "void_ratio")},
+                **({"bed_friction": aid.friction(system)} if aid.on else {})}
 
     def stop(r):
-        if cfg.target_density is not None and r["bulk_density"] >= cfg.target_density:
+        if cfg.target_density is not None and aid.reached(r["bulk_density"]):
             return f"bulk density {r['bulk_density'] / 1e3:.4g} g/cm^3 reached the target after {round(r['cycle'])} cycles"
+        aid.at_cycle_end(ctx, r)
         return None
 
     def finish(ctx_, system, state, cyc):
@@ -456,9 +481,92 @@ def run_vibrate(ctx, cfg, state_in):
         _log_bed(ctx_, "under the plate", meas)
 
     return _cyclic(ctx, cfg, _state_with(ctx, state_in, groups), "plate", measure,
-                   {"plate": "m", "bulk_density": "kg/m^3", "porosity": "1", "void_ratio": "1"}, stop=stop,
-                   finish_extra=finish,
-                   target=("bulk_density", cfg.target_density, True) if cfg.target_density is not None else None)
+                   {"plate": "m", "bulk_density": "kg/m^3", "porosity": "1", "void_ratio": "1",
+                    **({"bed_friction": "1"} if aid.on else {})}, stop=stop, finish_extra=finish,
+                   target=("bulk_density", cfg.target_density, True) if cfg.target_density is not None else None,
+                   start=aid.start if aid.on else None)
+
+
+def aid_levels(densities, after, ramp, target):
+    """Level k (0 = the case's friction, ``ramp`` = the aid's) of the densification aid after each
+    cycle end, from the bulk densities at cycle ends 0, 1, 2, ... (a pure function of them, so a
+    resumed stage replays it from its records).
+
+    From cycle ``after`` on, below the target: the aid starts at level 1; then with g the last
+    cycle's gain and r = target - rho the gap left, the level goes up one step while r > 3 g
+    (the bed would need more than three cycles at this rate), down one while r < g (the next
+    cycle would overshoot), and stays otherwise. So the last cycles approach the target at
+    gains of about a third of the gap, and a bed ends within about one such gain above it.
+    """
+    k, out = 0, [0]
+    for n in range(1, len(densities)):
+        rho, gain, gap = densities[n], densities[n] - densities[n - 1], target - densities[n]
+        if n >= after and gap > 0:
+            if k == 0:
+                k = 1
+            elif gap > 3.0 * gain:
+                k = min(ramp, k + 1)
+            elif gap < gain:
+                k -= 1
+        out.append(k)
+    return out
+
+
+class FrictionAid:
+    """The vibrate stage's densification aid (``densify``): a bed that has not reached
+    ``target_density`` after ``densify.after`` cycles vibrates on with the friction coefficient
+    between its particles lowered (walls and plate keep theirs) until it is within
+    ``densify.tolerance`` of the target. Lower friction lets the stones slide past each other
+    under the same load, the usual way a DEM sample is brought to a target density (e.g.
+    Thornton 2000, Geotechnique 50:43). The friction of level k (:func:`aid_levels`) is
+    mu_k = mu_0 + (mu_aid - mu_0) k / ramp: lowered step by step while the bed gains slowly,
+    raised again when it would overshoot. The next stage builds its contacts from the case's
+    materials, so the bed goes on at the case's friction."""
+
+    def __init__(self, spec, materials, target):
+        self.spec, self.materials, self.target = spec, materials, target
+        self.on = spec is not None
+        self.pairs = np.ix_(materials, materials)
+        self.mu0 = self.system = None
+        self.densities = []  # at the cycle ends 0, 1, ...
+
+    def friction(self, system):
+        """The friction coefficient between bed particles now (that of the first bed material pair)."""
+        m = int(self.materials[0])
+        return float(system.friction[m, m])
+
+    def reached(self, rho):
+        """Close enough to the target to stop."""
+        return rho >= self.target * (1.0 - (self.spec.tolerance if self.on else 0.0))
+
+    def _set(self):
+        k = aid_levels(self.densities, self.spec.after, self.spec.ramp, self.target)[-1]
+        self.system.friction[self.pairs] = self.mu0 + (self.spec.friction - self.mu0) * (k / self.spec.ramp)
+
+    def start(self, system, checkpoint, cycle):
+        """Before the first step: the case's friction kept; a resumed stage replays the levels from
+        the cycle ends of its checkpoint's records."""
+        from demcli.state import RecordTable
+
+        self.system, self.mu0 = system, system.friction[self.pairs].copy()
+        if checkpoint is not None:
+            rows = RecordTable.from_state(checkpoint, "dem").to_arrays()
+            ends = np.abs(rows["cycle"] - np.round(rows["cycle"])) < 1e-6
+            self.densities = [float(r) for c, r in zip(rows["cycle"][ends], rows["bulk_density"][ends]) if c > -1e-9]
+            self._set()
+
+    def at_cycle_end(self, ctx, row):
+        """At a whole cycle short of the target: the level of the next cycle."""
+        if not self.on:
+            return
+        if not self.densities:
+            self.densities.append(math.nan)  # cycle 0: no decision reads it (the aid starts at level 1)
+        self.densities.append(float(row["bulk_density"]))
+        before = self.friction(self.system)
+        self._set()
+        if self.friction(self.system) != before:
+            ctx.log(f"densify: bulk density {row['bulk_density'] / 1e3:.4g} g/cm^3 after {round(row['cycle'])} "
+                    f"cycles; friction between bed particles {before:.4g} -> {self.friction(self.system):.4g}")
 
 
 def _top(groups):
@@ -622,6 +730,15 @@ VIBRATE.update({
     "cycles": Int(min=1, doc="load cycles (seed: 45)"),
     "target_density": Optional(Float("kg/m^3", min=0, min_inclusive=False),
                                doc="stop at the first cycle end where the bulk density reaches it (seed: 1.55 g/cm^3)"),
+    "densify": Optional(Section({
+        "after": Int(min=1, doc="cycles at the case's friction before the aid starts"),
+        "friction": Float(min=0, doc="friction coefficient between bed particles while aided (walls and plate "
+                                     "keep theirs)"),
+        "ramp": Int(min=1, default=4, doc="steps from the case's friction down to it (levels k / ramp)"),
+        "tolerance": Float(min=0, max=0.05, default=0.002,
+                           doc="stop once the bulk density is within this share below the target"),
+    }), doc="densification aid: a bed below target_density after `after` cycles vibrates on at a lower friction "
+            "until it reaches it (the next stage has the case's friction again)"),
 })
 
 SLEEPER = _dem_fields()
