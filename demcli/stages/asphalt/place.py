@@ -24,7 +24,7 @@ import math
 
 import numpy as np
 
-from demcli.config.schema import Float, Int, Section, Str, Tagged, Vector
+from demcli.config.schema import Float, Int, Optional, Section, Str, Tagged, Vector
 from demcli.errors import InputError, StageError
 from demcli.stages.asphalt.common import copy_group  # (common registers the seeds and aggregates groups)
 from demcli.stages.base import StageType, earlier_stage, register_stage, require_dimension
@@ -32,6 +32,13 @@ from demcli.state.records import describe_column
 
 describe_column("share", "Mass share", "%", table="seeds", doc="mass percent of the aggregate in the class")
 describe_column("volume_share", "Volume share", "%", table="seeds", doc="percent of the seed spheres' volume")
+describe_column("radius_factor", "Radius factor", table="expand", doc="median radius / drawn radius")
+describe_column("solid_fraction", "Solid fraction", table="expand", doc="sum of sphere volumes / box volume "
+                "(overlaps counted in each sphere)")
+for _name, _label in (("overlap_mean", "Mean overlap / smaller radius"), ("overlap_max", "Largest overlap / smaller "
+                                                                                     "radius")):
+    describe_column(_name, _label, "1", "%", 100.0, table="expand",
+                    doc="overlap of a touching pair over the smaller of its radii")
 
 REGION = Section({"min": Vector(3, "m", doc="lower corner"), "max": Vector(3, "m", doc="upper corner")},
                  doc="box the spheres are placed in (the carving region)")
@@ -44,8 +51,24 @@ FIELDS = {
                                                doc="1 - sphere volume / box volume")}),
     }, doc="how many spheres: a count, or the porosity of the sphere packing"),
     "material": Str(doc="material of the aggregates carved from the spheres"),
-    "gap": Float("m", min=0, default=0.0, doc="clearance between spheres"),
+    "gap": Float("m", min=0, default=0.0, doc="clearance between spheres (random sequential addition)"),
     "max_tries": Int(min=100, default=20000, doc="failed candidates in a row before placement gives up"),
+    "expand": Optional(Section({
+        "start": Float(min=0.3, max=1, min_inclusive=False, default=0.75,
+                       doc="placement radius / drawn radius (random sequential addition at this size)"),
+        "steps": Int(min=1, default=10, doc="growth in this many equal radius factors"),
+        "max_steps": Int(min=1, default=2000, doc="relaxation steps per factor at most (x 4 after the last)"),
+        "ratio": Float(min=0, min_inclusive=False, default=1e-2,
+                       doc="mean unbalanced force / mean contact force that counts as equilibrium"),
+        "kn": Optional(Float("N/m", min=0, min_inclusive=False),
+                       doc="contact stiffness (default: the material's Young's modulus x the mean radius)"),
+        "local_damping": Float(min=0, max=1, max_inclusive=False, default=0.7),
+        "dt_factor": Float(min=0, max=1, min_inclusive=False, default=0.1,
+                           doc="time step / critical: 0.3 is unstable once spheres have ~10 overlapping neighbours"),
+        "max_tries": Int(min=100, default=20000, doc="placement at the start size gives up after these"),
+    }), doc="radius expansion with relaxation (demcli.stages.asphalt.expand): reaches solid fractions "
+            "beyond random sequential addition, the seed spheres then overlapping (seed 000: porosity 0.15, "
+            "overlaps counted in each sphere, as PFC counts them); without it, random sequential addition"),
 }
 
 
@@ -120,7 +143,12 @@ def run(ctx, cfg, state_in):
         raise InputError(f"stage {ctx.name}: the largest class ({upper.max() * 1e3:g} mm) does not fit the region "
                          f"({(hi - lo).min() * 1e3:g} mm across)")
     diam, cls, volume = draw_seeds(ctx.rng, cfg, lower, upper, share)
-    pos, placed = place_spheres(ctx.rng, lo, hi, 0.5 * diam, gap=cfg.gap, max_tries=cfg.max_tries)
+    expand_table = None
+    if cfg.expand is not None:
+        pos, expand_table = _expanded(ctx, cfg, 0.5 * diam, lo, hi)
+        placed = len(diam)
+    else:
+        pos, placed = place_spheres(ctx.rng, lo, hi, 0.5 * diam, gap=cfg.gap, max_tries=cfg.max_tries)
     if placed < len(diam):
         sf = np.sum(diam[~np.isnan(pos[:, 0])] ** 3) * math.pi / 6 / volume
         want = np.sum(diam ** 3) * math.pi / 6 / volume
@@ -145,6 +173,8 @@ def run(ctx, cfg, state_in):
         table.append(lower=lower[c] * 1e3, upper=upper[c] * 1e3, share=share[c], count=int(np.sum(cls == c)),
                      volume=float(vol[cls == c].sum()), volume_share=100 * float(vol[cls == c].sum() / vol.sum()))
     table.to_state(state)
+    if expand_table is not None:
+        expand_table.to_state(state)
     ctx.write_records(table, x="upper", ys=["share", "volume_share"])
     ctx.log(f"{n} seed spheres ({', '.join(str(int(np.sum(cls == c))) for c in range(len(lower)))} per class) "
             f"placed in {(hi - lo)[0] * 1e3:g} x {(hi - lo)[1] * 1e3:g} x {(hi - lo)[2] * 1e3:g} mm; "
@@ -152,12 +182,28 @@ def run(ctx, cfg, state_in):
     return state
 
 
+def _expanded(ctx, cfg, radii, lo, hi):
+    """(centres, record table ``expand``) by radius expansion; the record's CSV + PNG and a log line."""
+    from demcli.stages.asphalt.expand import expand
+    from demcli.state import RecordTable
+
+    table = RecordTable("expand", {"radius_factor": "1", "solid_fraction": "1", "overlap_mean": "1",
+                                   "overlap_max": "1", "unbalanced": "1", "steps": "1"})
+    pos, (mean, big) = expand(ctx, radii, lo, hi, cfg.expand, cfg.material, table)
+    ctx.write_records(table, x="radius_factor", ys=["overlap_mean", "overlap_max"])
+    ctx.log(f"radius expansion from {cfg.expand.start:g} x in {cfg.expand.steps} steps: overlaps {100 * mean:.3g} % "
+            f"of the smaller radius on average, {100 * big:.3g} % at most; unbalanced force ratio "
+            f"{table.to_arrays()['unbalanced'][-1]:.3g}")
+    return pos, table
+
+
 def describe(cfg, case):
     lo, hi = np.array(cfg.region.min), np.array(cfg.region.max)
     size = " x ".join(f"{v * 1e3:g}" for v in hi - lo)
     t = cfg.target
     amount = f"{t.count} spheres" if t.kind == "count" else f"sphere porosity {t.porosity:g}"
-    return f"{amount} in a {size} mm box, material {cfg.material}"
+    how = "" if cfg.expand is None else f", packed by radius expansion from {cfg.expand.start:g} x"
+    return f"{amount} in a {size} mm box, material {cfg.material}{how}"
 
 
 register_stage(StageType(

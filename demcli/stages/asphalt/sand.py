@@ -34,15 +34,14 @@ import math
 
 import numpy as np
 
-from demcli import interrupts
 from demcli.config.schema import Float, Int, List, Optional, Section, Str, Tagged
 from demcli.errors import InputError, StageError
 from demcli.stages import dem, loop
+from demcli.stages.relax import cycle_to_equilibrium, unbalanced
 from demcli.stages.base import ENGINE_KEEPS, ENGINE_OUTPUT, StageType, register_stage
 from demcli.stages.timing import time_step
 from demcli.state.fields import Field, register, register_group
 from demcli.state.records import describe_column
-from demcli.stepping import Stepper
 
 for _name, _label, _doc in [
         ("axial_strain", "Axial strain", "e_a = h / h0 - 1 of the platens' distance (tension positive, as the seed)"),
@@ -158,23 +157,10 @@ def specimen_walls(case, radius, height, base, material, cylinder=True):
     return dem.build_walls(_node(walls=walls), case)
 
 
-def _unbalanced(system):
-    """Mean unbalanced force over mean contact force (inf without contacts)."""
-    nl = system.nl
-    fc = nl.fc[nl.act.astype(bool)]
-    wfc = nl.wfc[:, :3]
-    forces = np.concatenate([np.linalg.norm(fc, axis=1), np.linalg.norm(wfc, axis=1)])
-    forces = forces[forces > 0]
-    if len(forces) == 0:
-        return math.inf
-    return float(np.linalg.norm(system.f, axis=1).mean() / forces.mean())
-
-
 def run_prepare(ctx, cfg, state_in):
     from demcli.engine.materials import ContactModel
     from demcli.engine.plan import make_plan
     from demcli.engine.system import Dynamics, System
-    from demcli.kernels import layout as K
     from demcli.kernels.placement import place_random
     from demcli.state.order import cell_order
     from demcli.state import RecordTable
@@ -214,19 +200,7 @@ def run_prepare(ctx, cfg, state_in):
         system.dt = time_step(system.critical_dt(), dt_factor=cfg.dt_factor)
 
     def cycle(max_steps):
-        done = 0
-        # Ctrl-C and SIGTERM act between chunks, not inside one
-        with interrupts.deferred() as poll, Stepper(ctx, system) as stepper:
-            while done < max_steps:
-                status, k, _ = stepper.advance(min(200, max_steps - done))
-                if status != K.OK:
-                    raise StageError(f"stage {ctx.name}: packing went unstable ({K.STATUS_TEXT[status]}) at step "
-                                     f"{system.step}; lower dt_factor or kn")
-                done += k
-                if _unbalanced(system) < eq.ratio:
-                    break
-                poll()
-        return done
+        return cycle_to_equilibrium(ctx, system, max_steps, eq.ratio)
 
     def measures():
         """(isotropic stress [Pa], solid fraction, coordination: contacts and bonds per sphere)."""
@@ -238,7 +212,7 @@ def run_prepare(ctx, cfg, state_in):
         p = p if stress is None else stress
         table.append({"phase": PHASES.index(phase) + 1, "radius_factor": float(system.rad.mean()) / r,
                       "solid_fraction": phi, "isotropic_stress": p, "coordination": z,
-                      "unbalanced": _unbalanced(system), "steps": system.step})
+                      "unbalanced": unbalanced(system), "steps": system.step})
         return p, phi, z
 
     grow = (1.0 / cfg.start_factor) ** (1.0 / cfg.expansion_steps)
