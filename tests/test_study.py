@@ -165,6 +165,7 @@ def test_the_shipped_study_commands_are_valid(study):
     args = shlex.split(text)
     assert args[2] == f"cases/studies/{study.name}"
     varies = [parse_vary(args[k + 1]) for k, a in enumerate(args) if a == "--vary"]
+    varies += [parse_realisations(args[k + 1]) for k, a in enumerate(args) if a == "--realisations"]
     fixed = [args[k + 1] for k, a in enumerate(args) if a == "--set"]
     metric = parse_metric(args[args.index("--metric") + 1])
     # Then its variants and metric validate against the case
