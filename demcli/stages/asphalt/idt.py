@@ -1,0 +1,166 @@
+"""``idt``: indirect tension (Brazilian, diametral compression) of a bonded cylindrical specimen
+(issue #32; AASHTO T 322 / ASTM D6931 geometry).
+
+The specimen of a ``prepare`` stage (group ``bonded_specimen``: a cylinder of diameter D and
+thickness t along z) is loaded across a diameter, along x, between two rigid flat heads: plane
+walls touching its outermost spheres, one fixed, the other moving at the constant head speed
+``speed`` (the standards: 50.8 mm/min; a DEM run affords far faster, see the quasi-static check).
+For an elastic disk under a line load P, the stress across the loaded diameter is a uniform
+tension sigma = 2 P / (pi t D) (Timoshenko & Goodier, sec. 41), the indirect tensile strength
+ITS = 2 P_max / (pi t D) at the peak load. The standards' 12.7 mm curved loading strips spread the
+load; flat heads load the outermost spheres, which the elastic centre stress does not notice
+(the strip changes it by under 1 % for a strip of D/8) but which can crush the contact zone.
+
+Records ``records/<stage>_idt`` (CSV + PNG): time, deformation (the heads' approach), load P
+(the moving head's force, compression positive), nominal stress 2 P / (pi t D), intact and broken
+bonds (tension, shear). The stage stops after the peak, when the load has fallen below
+``post_peak`` of the peak with at least 1 % of the bonds broken (a failed specimen), or at
+``max_deformation``. Result group
+``idt_result``: peak load, ITS, deformation at the peak, and the quasi-static measure: the
+kinetic energy at the peak over the work the head has done by then (warned above
+``quasi_static``; halve the speed to check). Broken bonds by mode: ``output.force_chains`` writes
+the bonds with their state as VTU lines (docs/measure.md).
+"""
+
+import math
+
+import numpy as np
+
+from demcli.config.schema import Float, Optional, Section, Str
+from demcli.errors import InputError
+from demcli.stages import dem, loop
+from demcli.stages.base import ENGINE_KEEPS, ENGINE_OUTPUT, StageType, register_stage
+from demcli.state.fields import Field, register, register_group
+from demcli.state.records import describe_column
+
+describe_column("deformation", "Deformation", "m", "mm", 1e3, table="idt", doc="approach of the two heads")
+describe_column("load", "Load", "N", "kN", 1e-3, table="idt", doc="force on the moving head, compression positive")
+describe_column("tensile_stress", "Nominal tensile stress", "Pa", "MPa", 1e-6, table="idt",
+                doc="2 P / (pi t D): the elastic tension across the loaded diameter")
+
+register_group("idt_result", "Indirect tension test result", writer="stage idt")
+for _name, _unit, _doc in [("peak_load", "N", "largest load P_max"),
+                           ("its", "Pa", "indirect tensile strength 2 P_max / (pi t D)"),
+                           ("deformation_at_peak", "m", "heads' approach at the peak load"),
+                           ("diameter", "m", "specimen diameter D"), ("thickness", "m", "specimen thickness t"),
+                           ("kinetic_to_work", "1", "kinetic energy at the peak / the head's work until then")]:
+    register(Field(f"idt_result/{_name}", "f", (), _unit, _doc, writer="stage idt"))
+
+
+def _fields():
+    f = {k: v for k, v in dem.FIELDS.items() if k not in ("walls", "stop", "time")}
+    f.update({
+        "speed": Float("m/s", min=0, min_inclusive=False, doc="head speed (the standards: 50.8 mm/min)"),
+        "max_deformation": Float(min=0, max=0.5, min_inclusive=False, default=0.1,
+                                 doc="stop at this approach of the heads, as a share of D"),
+        "post_peak": Float(min=0, max=1, default=0.5, doc="stop once the load falls below this share of the peak"),
+        "head_material": Str(doc="material of the loading heads"),
+        "quasi_static": Float(min=0, min_inclusive=False, default=0.01,
+                              doc="warn when the kinetic energy at the peak exceeds this share of the work"),
+        "time": Section({
+            "dt": Optional(Float("s", min=0, min_inclusive=False), doc="explicit time step (default: auto)"),
+            "dt_factor": Float(min=0, max=1, min_inclusive=False, default=0.2),
+        }, default={}),
+    })
+    return f
+
+
+def nominal_stress(load, thickness, diameter):
+    """sigma = 2 P / (pi t D) [Pa]: the elastic tension across the loaded diameter of a disk."""
+    return 2.0 * load / (math.pi * thickness * diameter)
+
+
+def _heads(cfg, x, rad, base, thickness):
+    """The fixed and the moving head (plane walls normal to x, touching the outermost spheres)."""
+    from demcli.config.schema import Node
+
+    lo, hi = float(np.min(x[:, 0] - rad)), float(np.max(x[:, 0] + rad))
+    z0, z1 = base[2], base[2] + thickness
+    ext = (lo, float(np.min(x[:, 1] - rad)), z0, hi, float(np.max(x[:, 1] + rad)), z1)
+    common = {"material": cfg.head_material, "lay_on_particles": None}
+    return [Node({"type": "plane", "name": "fixed", "point": (lo, base[1], base[2]), "normal": (1.0, 0.0, 0.0),
+                  "motion": None, "extent": (lo, *ext[1:3], lo, *ext[4:]), **common}),
+            Node({"type": "plane", "name": "head", "point": (hi, base[1], base[2]), "normal": (-1.0, 0.0, 0.0),
+                  "motion": Node({"mode": "velocity", "velocity": (-cfg.speed, 0.0, 0.0)}),
+                  "extent": (hi, *ext[1:3], hi, *ext[4:]), **common})], hi - lo
+
+
+def run_idt(ctx, cfg, state_in):
+    """Diametral compression of the bonded specimen to failure (module doc)."""
+    from demcli.config.schema import Node
+    from demcli.state import RecordTable
+
+    sp = state_in.groups.get("bonded_specimen")
+    if sp is None:
+        raise InputError(f"stage {ctx.name}: its input has no bonded_specimen group (written by a prepare stage)")
+    D, t = 2.0 * float(sp["radius"]), float(sp["height"])
+    x = np.asarray(state_in.groups["bodies"]["x"])
+    rad = np.asarray(state_in.groups["spheres"]["radius"])
+    base = np.array([*x[:, :2].mean(axis=0), float(sp["base_z"])])
+    walls, gap0 = _heads(cfg, x, rad, base, t)
+    dcfg = dict(cfg)
+    dcfg.update(walls=walls, stop=None, time=Node({"duration": cfg.max_deformation * D / cfg.speed, "steps": None,
+                                                    "dt": cfg.time.dt, "dt_factor": cfg.time.dt_factor}))
+    cols = {"deformation": "m", "load": "N", "tensile_stress": "Pa"}
+    peak = [0.0]
+
+    def row(system):
+        p = float(-system.wforce[1] @ system.walls.normal[1])
+        peak[0] = max(peak[0], p)
+        return {"deformation": gap0 - float(system.wpoint[1, 0] - system.wpoint[0, 0]), "load": p,
+                "tensile_stress": nominal_stress(p, t, D)}
+
+    nbonds = len(state_in.groups["bonds"]["i"])
+
+    def stop(system, r):
+        # only once the specimen is breaking: a loose surface sphere pushed off the head drops the
+        # load of the first contacts to zero before the specimen carries any
+        broken = r.get("broken_tension", 0) + r.get("broken_shear", 0)
+        if peak[0] > 0 and r["load"] < cfg.post_peak * peak[0] and broken >= 0.01 * nbonds:
+            return f"load {r['load'] / 1e3:.4g} kN below {cfg.post_peak:g} of the peak {peak[0] / 1e3:.4g} kN"
+        return None
+
+    def start(system, ckpt):
+        if ckpt is not None:
+            peak[0] = float(np.max(RecordTable.from_state(ckpt, "dem").to_arrays()["load"], initial=0.0))
+
+    def finish(ctx_, system, state, table):
+        _finish(ctx_, cfg, state, state_in, table, cols, D, t)
+
+    return loop.integrate(ctx, Node(dcfg), state_in, loop.Hooks(columns=cols, row=row, stop=stop, start=start,
+                                                                 finish=finish))
+
+
+def _finish(ctx, cfg, state, state_in, table, cols, D, t):
+    """The ``idt`` record and the result group; the quasi-static check."""
+    from demcli.state import RecordTable
+
+    rows = table.to_arrays()
+    keep = ["time", *cols] + [c for c in ("bonds_intact", "broken_tension", "broken_shear") if c in rows]
+    out = RecordTable("idt", {c: table.columns[c] for c in keep})
+    for k in range(len(rows["time"])):
+        out.append({c: rows[c][k] for c in keep})
+    out.to_state(state)
+    ctx.write_records(out, x="deformation", ys=["load"])
+    k = int(np.argmax(rows["load"]))
+    d, p = np.asarray(rows["deformation"]), np.asarray(rows["load"])
+    work = float(np.sum(0.5 * (p[1:k + 1] + p[:k]) * np.diff(d[:k + 1])))
+    ratio = float(rows["kinetic"][k]) / work if work > 0 else math.inf
+    its = nominal_stress(p[k], t, D)
+    state.groups["idt_result"] = {"peak_load": np.float64(p[k]), "its": np.float64(its),
+                                  "deformation_at_peak": np.float64(d[k]), "diameter": np.float64(D),
+                                  "thickness": np.float64(t), "kinetic_to_work": np.float64(ratio)}
+    state.groups["bonded_specimen"] = dict(state_in.groups["bonded_specimen"])
+    ctx.log(f"indirect tension: peak load {p[k] / 1e3:.4g} kN at {d[k] * 1e3:.4g} mm, ITS = 2 P / (pi t D) = "
+            f"{its / 1e6:.4g} MPa (D {D * 1e3:.4g} mm, t {t * 1e3:.4g} mm); kinetic energy / work at the peak "
+            f"{ratio:.3g}")
+    if ratio > cfg.quasi_static:
+        ctx.log(f"warning: the test is not quasi-static (kinetic energy {ratio:.3g} of the work at the peak, above "
+                f"{cfg.quasi_static:g}): lower the speed (halving it should leave the ITS unchanged)")
+
+
+register_stage(StageType(
+    "idt", _fields(), run_idt, needs_input=True, requires=("bonded_specimen/radius", "bonds/i"),
+    provides=ENGINE_OUTPUT + ("idt_result/*",), keeps=ENGINE_KEEPS + ("bonded_specimen",),
+    case_check=dem.scene_check,
+    doc="indirect tension (diametral compression) of a bonded cylindrical specimen: load, ITS = 2 P / (pi t D)"))
