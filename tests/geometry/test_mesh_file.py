@@ -2,6 +2,8 @@
 placed by scale, rotation and translation; bad files are configuration errors (exit code 2) that
 name the case file, the key, the rule and the value."""
 
+from pathlib import Path
+
 import meshio
 import numpy as np
 import pytest
@@ -65,3 +67,15 @@ def test_degenerate_triangle_is_refused(tmp_path):
 def test_unreadable_file_is_a_config_error(tmp_path):
     (tmp_path / "g.stl").write_bytes(b"\x00garbage")
     assert "cannot read as STL" in _error(tmp_path, "g.stl")
+
+
+def test_shipped_marshall_head_mesh():
+    # Given the breaking-head mesh shipped in cases/meshes (made by make_marshall_head.py)
+    root = Path(__file__).resolve().parents[2]
+    verts, tris = read_mesh(root / "cases" / "meshes" / "marshall_head.stl", scale=1e-3)
+    # Then it is one arc of radius 50.8 mm with its normals towards the specimen's axis (y)
+    assert tris.shape == (128, 3) and verts.shape == (85, 3)
+    np.testing.assert_allclose(np.hypot(verts[:, 0], verts[:, 2]), 0.0508, rtol=1e-6)
+    normal = np.cross(verts[tris[:, 1]] - verts[tris[:, 0]], verts[tris[:, 2]] - verts[tris[:, 0]])
+    inward = -verts[tris].mean(axis=1) * [1, 0, 1]
+    assert (np.einsum("ij,ij->i", normal, inward) > 0).all()
