@@ -6,7 +6,6 @@ a concave corner gives both faces, a convex edge one contact along the edge's no
 import numpy as np
 import pytest
 
-from demcli.geometry.mesh_file import rotation_matrix
 from demcli.kernels.mesh import MAX_TOUCH, bin_triangles, closest_on_triangle, sphere_mesh_contacts
 
 TOL = 1e-12
@@ -25,24 +24,6 @@ def brute_closest(p, a, b, c, n=400):
     if w[0] >= 0 and w[1] >= 0 and w[0] + w[1] <= 1:
         cands.append(f)
     return min(cands, key=lambda q: np.linalg.norm(p - q))
-
-
-def grid_mesh(n, size, rot=(0.0, 0.0, 0.0), shift=(0.0, 0.0, 0.0), seed=None):
-    """Flat n x n squares of edge ``size`` in z = 0, each split in two triangles (diagonals in
-    alternating directions; vertices jittered in-plane when ``seed``), rotated then shifted."""
-    xs = np.arange(n + 1) * size
-    gx, gy = np.meshgrid(xs, xs, indexing="ij")
-    verts = np.column_stack([gx.ravel(), gy.ravel(), np.zeros(gx.size)])
-    if seed is not None:
-        inner = (gx.ravel() > 0) & (gx.ravel() < xs[-1]) & (gy.ravel() > 0) & (gy.ravel() < xs[-1])
-        verts[inner, :2] += np.random.default_rng(seed).uniform(-0.2, 0.2, (inner.sum(), 2)) * size
-    tris = []
-    for i in range(n):
-        for j in range(n):
-            a, b, c, d = i * (n + 1) + j, (i + 1) * (n + 1) + j, (i + 1) * (n + 1) + j + 1, i * (n + 1) + j + 1
-            tris += [(a, b, c), (a, c, d)] if (i + j) % 2 else [(a, b, d), (b, c, d)]
-    rot_m = rotation_matrix(rot)
-    return np.ascontiguousarray(verts @ rot_m.T + shift), np.array(tris, np.int64), rot_m @ [0.0, 0.0, 1.0]
 
 
 def contacts(centre, r, verts, tris, cell):
@@ -66,7 +47,7 @@ def test_closest_point_matches_brute_force():
         np.testing.assert_allclose(q, brute_closest(p, a, b, c), atol=1e-12)
 
 
-def test_binning_lists_every_triangle_in_its_cells():
+def test_binning_lists_every_triangle_in_its_cells(grid_mesh):
     verts, tris, _ = grid_mesh(6, 0.1, seed=1)
     lo, dims, cstart, clist = bin_triangles(verts, tris, 0.13)
     # every triangle appears at least once, and each cell lists distinct triangles
@@ -86,7 +67,7 @@ def _plane_points(verts, tris, size, rng):
 
 
 @pytest.mark.parametrize("rot, seed", [((0.0, 0.0, 0.0), None), ((23.0, -41.0, 67.0), 5)])
-def test_flat_mesh_gives_the_plane_force_everywhere(rot, seed):
+def test_flat_mesh_gives_the_plane_force_everywhere(grid_mesh, rot, seed):
     # Given a flat mesh of 2 x 8 x 8 triangles (tilted, jittered) and spheres pressed into it
     size, r, k_n = 0.1, 0.07, 1.0e6
     verts, tris, normal = grid_mesh(8, size, rot, (0.3, -0.2, 0.5), seed)
@@ -107,7 +88,7 @@ def test_flat_mesh_gives_the_plane_force_everywhere(rot, seed):
         assert np.linalg.norm(f_mesh - f_plane) <= 1e-11 * np.linalg.norm(f_plane)
 
 
-def test_flat_mesh_force_is_continuous_across_edges():
+def test_flat_mesh_force_is_continuous_across_edges(grid_mesh):
     # Given a sphere sliding along a line that crosses many edges and vertices
     verts, tris, normal = grid_mesh(8, 0.1, seed=2)
     r = 0.05
