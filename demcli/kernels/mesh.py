@@ -215,7 +215,8 @@ def sphere_mesh_contacts(centre, r, verts, tris, lo, dims, cstart, clist, cell, 
                          out_delta):
     """Contacts of one sphere (centre (3,) [m], radius r [m]) with one mesh wall, one per touched
     feature (see the module notes). Grid from :func:`bin_triangles`; ``mark`` (nt,) int64 and
-    ``tag`` a value no entry of mark holds (a query number: mark[t] = tag for the visited triangles). Writes row k < count of out_tri (triangle), out_q (contact point on the mesh [m]),
+    ``tag`` a value no entry of mark holds (a query number: mark[t] = tag for the visited
+    triangles). Writes row k < count of out_tri (triangle), out_q (contact point on the mesh [m]),
     out_n (unit normal, mesh to sphere), out_delta (overlap r - |c - q| [m]); returns count.
     Out arrays have MAX_TOUCH rows."""
     dist = np.empty(MAX_TOUCH)
