@@ -158,6 +158,21 @@ def wall_mesh(state) -> meshio.Mesh:
     return meshio.Mesh(pts, [("quad", cells)], cell_data=cell_data)
 
 
+def mesh_wall_surface(verts, tris, wall, velocity=(0.0, 0.0, 0.0), force=(0.0, 0.0, 0.0)) -> meshio.Mesh:
+    """A mesh wall as a triangle surface: verts (nv, 3) [m] where the wall is now, tris (nt, 3);
+    cell data ``wall`` (its index), ``velocity`` [m/s] and ``force`` [N] (the wall's, on every cell)."""
+    nt = len(tris)
+    cell_data = {"wall": [np.full(nt, wall, np.int64)],
+                 "velocity": [np.tile(np.asarray(velocity, float), (nt, 1))],
+                 "force": [np.tile(np.asarray(force, float), (nt, 1))]}
+    return meshio.Mesh(np.asarray(verts, float), [("triangle", np.asarray(tris, np.int64))], cell_data=cell_data)
+
+
+def write_mesh_wall_vtu(path, verts, tris, wall, velocity=(0.0, 0.0, 0.0), force=(0.0, 0.0, 0.0)) -> Path:
+    """Write one mesh wall as a binary VTU triangle surface (atomically); returns the path."""
+    return _write_mesh(path, mesh_wall_surface(verts, tris, wall, velocity, force))
+
+
 def write_walls_vtu(path, state) -> Path:
     """Write the walls of ``state`` as a binary VTU surface (atomically); returns the path."""
     return _write_mesh(path, wall_mesh(state))

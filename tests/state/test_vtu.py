@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from demcli.state.fields import example_state
-from demcli.state.vtu import PvdSeries, Snapshots, write_spheres_vtu, write_walls_vtu
+from demcli.state.vtu import PvdSeries, Snapshots, write_mesh_wall_vtu, write_spheres_vtu, write_walls_vtu
 
 
 @pytest.fixture
@@ -95,3 +95,19 @@ def test_pvd_resume_keeps_entries(tmp_path, state):
     series.truncate(0.3)
     # Then the file on disk follows
     assert [e[0] for e in PvdSeries(tmp_path / "s.pvd", resume=True).entries] == [0.25]
+
+
+def test_mesh_wall_vtu_round_trip(tmp_path):
+    # Given a mesh wall of two triangles, moved and loaded
+    verts = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], float) + [0.0, 0.0, 0.25]
+    tris = np.array([[0, 1, 2], [0, 2, 3]])
+    # When it is written as a snapshot
+    path = write_mesh_wall_vtu(tmp_path / "mesh_000001.vtu", verts, tris, 6, velocity=(0, 0, -0.1),
+                               force=(0, 0, 12.5))
+    # Then meshio reads the same triangles, points and wall data back
+    back = meshio.read(path)
+    assert back.cells[0].type == "triangle"
+    np.testing.assert_array_equal(back.cells[0].data, tris)
+    np.testing.assert_array_equal(back.points, verts)
+    np.testing.assert_array_equal(back.cell_data["wall"][0], [6, 6])
+    np.testing.assert_array_equal(back.cell_data["force"][0], [[0, 0, 12.5]] * 2)
