@@ -94,7 +94,7 @@ def load_stage_types():
     from demcli.stages import dem
     from demcli.stages.asphalt import carve, compact, cut, mastic, place  # 3D asphalt, seed 000
     from demcli.stages.asphalt import discretize, polygons  # 2D sections, seed 001
-    from demcli.stages.asphalt import sand  # bonded viscoelastic specimens, seed 003
+    from demcli.stages.asphalt import dynamic_modulus, sand  # bonded viscoelastic specimens, seed 003
     from demcli.stages.ballast import assemble, box, clumps, library  # railway ballast, seed 002
     from demcli.stages.specimen import generate, gradation, particles
 
