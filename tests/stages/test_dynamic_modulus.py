@@ -16,6 +16,7 @@ from demcli.stages.asphalt.dynamic_modulus import complex_modulus, schedule, sin
 from demcli.state import read_state
 
 # (stresses tiny: the Maxwell dashpots creep under the mean stress, 1.3 s at 11 Pa closes ~1 % of r)
+# (the platen 3e-6 kg, about the lattice's mass: stable on the stiff platen contacts, f / f_n ~ 0.03)
 # the lattice: 3 x 3 columns of 4 spheres, r = 1 mm on the generate stage's spacing a = 2.02 r, every
 # neighbour pair one Burgers bond (normal element in compression and tension), frictionless platens
 R, A_SP, NX, NZ = 1e-3, 2.02e-3, 3, 4
@@ -29,7 +30,8 @@ def _lattice_case(tmp_path, **stage):
     burgers = {"km": KM, "cm": CM, "kk": KK, "ck": CK}
     dm = {"name": "dm", "type": "dynamic_modulus", "section": "box", "frequencies": FREQS,
           "stress": {"contact": "1 Pa", "amplitude": "20 Pa"}, "conditioning_cycles": 4, "cycles": 5,
-          "points_per_cycle": 40, "platen_material": "steel", "contact": {"law": "linear", "kn": f"{KW} N/m"},
+          "points_per_cycle": 40, "platen_material": "steel", "load_mass": "3e-6 kg",
+          "contact": {"law": "linear", "kn": f"{KW} N/m"},
           "bonds": {"create": True, "gap": 0.03,
                     "models": [{"model": "burgers", "materials": ["grain", "grain"], "kn": f"{KM} N/m",
                                 "compression": "burgers", "tension": burgers, "shear": burgers}]},
@@ -89,7 +91,8 @@ def test_lattice_matches_the_closed_form(tmp_path):
     mod, phase = st["dynamic_modulus_result/modulus"], st["dynamic_modulus_result/phase_angle"]
     print("|E*| rel err", mod / exact[:, 0] - 1, "phase err deg", phase - exact[:, 1], "exact", exact,
           "f/f_n", st["dynamic_modulus_result/frequency_ratio"])
-    # Then |E*| within 2 % and the phase within 1 degree at every frequency
+    # Then |E*| within 2 % and the phase within 1 degree at every frequency (measured: |E*| -2.2e-4,
+    # -2.5e-5, -3.1e-6; phase +0.0054, +0.0010, +0.0002 deg at 100, 30, 10 Hz; f/f_n 0.028, 0.010, 0.004)
     assert np.all(np.abs(mod / exact[:, 0] - 1) < 0.02)
     assert np.all(np.abs(phase - exact[:, 1]) < 1.0)
     # and the closed form does vary strongly over the range (the test can fail)
