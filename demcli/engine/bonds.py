@@ -52,7 +52,8 @@ for _name, _kind, _dims, _unit, _doc, _kw in [
     register(Field(f"bonds/{_name}", _kind, _dims, _unit, _doc, writer="effect bonds", **_kw))
 
 PARAM_NAMES = ("kind", "kn", "ks", "normal_strength", "shear_strength", "bond_kn", "bond_ks", "radius_multiplier",
-               "tension_km", "tension_cm", "tension_kk", "tension_ck", "shear_km", "shear_cm", "shear_kk", "shear_ck", "compression")
+               "tension_km", "tension_cm", "tension_kk", "tension_ck", "shear_km", "shear_cm", "shear_kk", "shear_ck",
+               "compression")
 _HIST_FIELDS = (("force_n", B.H_FN, 1), ("force_s", B.H_FS, 3), ("moment_t", B.H_MT, 1), ("moment_b", B.H_MB, 3),
                 ("kelvin_n", B.H_UKN, 1), ("kelvin_s", B.H_UKS, 3), ("separation", B.H_SEP, 1),
                 ("overlap0", B.H_D0, 1))
