@@ -40,7 +40,8 @@ from demcli.state.records import describe_column
 for _name, _label, _unit, _disp, _scale, _table, _doc in [
         ("stress", "Axial stress", "Pa", "kPa", 1e-3, "dem", "top platen's force over the section (compression "
                                                               "positive)"),
-        ("modulus", "|E*|", "Pa", "MPa", 1e-6, "dynamic_modulus", "dynamic modulus: stress over strain amplitude")]:
+        ("modulus", "Dynamic modulus", "Pa", "MPa", 1e-6, "dynamic_modulus",
+         "magnitude of E*: stress over strain amplitude")]:
     describe_column(_name, _label, _unit, _disp, _scale, table=_table, doc=_doc)
 describe_column("strain", "Axial strain", display="%", scale=100.0, table="dem",
                 doc="e = 1 - h / H_0 of the platens' distance (compression positive)")
@@ -50,7 +51,7 @@ describe_column("frequency", "Frequency", "Hz", table="dynamic_modulus", doc="lo
 register_group("dynamic_modulus_result", "Dynamic modulus per frequency (AASHTO T 342 style)",
                writer="stage dynamic_modulus")
 for _name, _unit, _doc in [("frequency", "Hz", "loading frequencies, in the order run"),
-                           ("modulus", "Pa", "|E*| = stress amplitude / strain amplitude"),
+                           ("modulus", "Pa", "dynamic modulus (magnitude of E*) = stress amplitude / strain amplitude"),
                            ("phase_angle", "deg", "lag of the strain behind the stress"),
                            ("frequency_ratio", "1", "f / f_n (quasi-static measure)")]:
     register(Field(f"dynamic_modulus_result/{_name}", "f", ("n_freq",), _unit, _doc, writer="stage dynamic_modulus"))
