@@ -117,9 +117,19 @@ def test_bad_input_exits_2_with_the_rule(tmp_path, override, message):
     assert message in res.output and "Traceback" not in res.output
 
 
-def test_smoke_case_measures_a_viscoelastic_specimen(tmp_path):
+SMOKE_CASE = ROOT / "cases" / "smoke" / "sand_asphalt_dynamic_modulus.yaml"
+
+
+@pytest.fixture(scope="module")
+def smoke(tmp_path_factory):
+    out = tmp_path_factory.mktemp("dm_smoke")
+    run_case(SMOKE_CASE, out=out, quiet=True)
+    return out
+
+
+def test_smoke_case_measures_a_viscoelastic_specimen(smoke):
     # Given the smoke chain: a 200-sphere bonded specimen (Burgers in compression too), 50 then 20 Hz
-    run_case(ROOT / "cases" / "smoke" / "sand_asphalt_dynamic_modulus.yaml", out=tmp_path, quiet=True)
+    tmp_path = smoke
     st = read_state(tmp_path / "01-dm.h5")
     from demcli.kernels import bonds as B
     # Then the bonds carry the compression option
@@ -135,3 +145,17 @@ def test_smoke_case_measures_a_viscoelastic_specimen(tmp_path):
     # and the time series covers 2 x (1 + 5) cycles: 6/50 + 6/20 s
     series = read_record(tmp_path / "records" / "dm_series.csv")[0]
     assert series["time"][-1] == pytest.approx(6 / 50 + 6 / 20, rel=1e-9)
+
+
+def test_interrupted_stage_resumes_bit_identically(smoke, tmp_path, h5_differences, interrupt_and_resume):
+    import shutil
+
+    from demcli.engine.system import System
+
+    # Given the smoke chain's stage interrupted (Ctrl-C) at step 30 000, in the second frequency (20 Hz
+    # from step 23 520: the resumed run must set the platen's haversine from the step), when resumed
+    shutil.copy(smoke / "00-prepare.h5", tmp_path / "00-prepare.h5")
+    interrupt_and_resume(System, 30000, SMOKE_CASE, tmp_path, "01-dm.ckpt.h5")
+    # Then the state equals the uninterrupted run's, dataset for dataset (but the wall-clock times)
+    diff = h5_differences(smoke / "01-dm.h5", tmp_path / "01-dm.h5")
+    assert [d for d in diff if "wall_time" not in d] == []

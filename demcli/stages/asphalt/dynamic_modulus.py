@@ -200,10 +200,11 @@ def _results(cfg, load, rows, area, h0, m_eff):
         sel = (t >= t0 - tol) & (t <= t1 + tol)
         mod, phase, res = complex_modulus(t[sel], rows["stress"][sel], rows["strain"][sel], f)
         fn = math.sqrt(mod * area / h0 / m_eff) / (2.0 * math.pi)
-        c0, s0 = load.clock.get(k, (math.nan, 0))
+        c0, s0 = load.clock.get(k, (math.nan, 0))  # (a resumed run: the time since it resumed)
         c1, s1 = load.clock.get(k + 1, load.clock["end"])
         out.append({"frequency": f, "modulus": mod, "phase_angle": phase, "fit_residual": res,
-                    "frequency_ratio": f / fn, "steps": s1 - s0, "wall_time": c1 - c0})
+                    "frequency_ratio": f / fn, "steps": int(load.first[k + 1] - load.first[k]) * load.rec_every,
+                    "wall_time": c1 - c0, "steps_timed": s1 - s0})
     return out
 
 
@@ -243,6 +244,7 @@ def run_dynamic_modulus(ctx, cfg, state_in):
         t = RecordTable("dynamic_modulus", {"frequency": "Hz", "modulus": "Pa", "phase_angle": "deg",
                                             "fit_residual": "1", "frequency_ratio": "1", "steps": "1",
                                             "wall_time": "s"})
+        _report(ctx_, cfg, res, n_s)
         for r in res:
             t.append(r)
         t.to_state(state)
@@ -252,7 +254,6 @@ def run_dynamic_modulus(ctx, cfg, state_in):
         for grp in ("bonded_specimen",):
             if grp in state_in.groups:
                 state.groups[grp] = dict(state_in.groups[grp])
-        _report(ctx_, cfg, res, n_s)
 
     hooks = loop.Hooks(columns=cols, row=row, finish=finish, timing=load.timing,
                        start=lambda system, ckpt: load.apply(system))
@@ -262,7 +263,8 @@ def run_dynamic_modulus(ctx, cfg, state_in):
 def _report(ctx, cfg, res, n_s):
     """One log line per frequency (|E*|, phase, fit, f / f_n, particle-steps/s) and the warnings."""
     for r in res:
-        speed = n_s * r["steps"] / r["wall_time"] if r["wall_time"] > 0 else math.nan
+        timed = r.pop("steps_timed")
+        speed = n_s * timed / r["wall_time"] if r["wall_time"] > 0 else math.nan
         ctx.log(f"f = {r['frequency']:g} Hz: |E*| = {r['modulus'] / 1e6:.5g} MPa, phase {r['phase_angle']:.3f} deg, "
                 f"fit residual {r['fit_residual']:.2g}, f/f_n = {r['frequency_ratio']:.3g}; {r['steps']} steps, "
                 f"{speed:.3g} particle-steps/s")
