@@ -52,7 +52,8 @@ for _name, _kind, _dims, _unit, _doc, _kw in [
     register(Field(f"bonds/{_name}", _kind, _dims, _unit, _doc, writer="effect bonds", **_kw))
 
 PARAM_NAMES = ("kind", "kn", "ks", "normal_strength", "shear_strength", "bond_kn", "bond_ks", "radius_multiplier",
-               "tension_km", "tension_cm", "tension_kk", "tension_ck", "shear_km", "shear_cm", "shear_kk", "shear_ck")
+               "tension_km", "tension_cm", "tension_kk", "tension_ck", "shear_km", "shear_cm", "shear_kk", "shear_ck",
+               "compression")
 _HIST_FIELDS = (("force_n", B.H_FN, 1), ("force_s", B.H_FS, 3), ("moment_t", B.H_MT, 1), ("moment_b", B.H_MB, 3),
                 ("kelvin_n", B.H_UKN, 1), ("kelvin_s", B.H_UKS, 3), ("separation", B.H_SEP, 1),
                 ("overlap0", B.H_D0, 1))
@@ -65,7 +66,8 @@ def model_row(kind, **params):
     ``kind``: contact_bond (kn, ks [N/m], normal_strength, shear_strength [N]),
     parallel_bond (bond_kn, bond_ks [Pa/m], radius_multiplier, strengths [Pa]) or burgers
     (kn [N/m] in compression; tension and shear: dicts of km, kk [N/m], cm, ck [N s/m];
-    strengths [N]).
+    strengths [N]; compression: "elastic" (default) or "burgers", the tension element then
+    acting in compression too).
     """
     row = np.zeros(B.N_BPARAMS)
     row[B.B_KIND] = B.KIND_NAMES.index(kind)
@@ -81,6 +83,7 @@ def model_row(kind, **params):
         for col, part in ((B.B_KMN, "tension"), (B.B_KMS, "shear")):
             el = params[part]
             row[col:col + 4] = el["km"], el["cm"], el["kk"], el["ck"]
+        row[B.B_COMP] = 1.0 if params.get("compression", "elastic") == "burgers" else 0.0
     return row
 
 
@@ -107,7 +110,10 @@ class BondSet:
         out = cls.empty(n_spheres)
         m = groups.get("bond_models")
         if m is not None and len(np.asarray(m["params"])):
-            out.prm = np.ascontiguousarray(m["params"], np.float64).reshape(-1, B.N_BPARAMS)
+            prm = np.asarray(m["params"], np.float64)
+            prm = prm.reshape(len(prm), -1)
+            # a state written before the compression column: elastic compression (0)
+            out.prm = np.ascontiguousarray(np.pad(prm, ((0, 0), (0, B.N_BPARAMS - prm.shape[1]))))
             out.materials = np.ascontiguousarray(m["materials"], np.int64).reshape(-1, 2)
         g = groups.get("bonds")
         if g is None or len(np.asarray(g["i"])) == 0:
@@ -222,7 +228,9 @@ class BondSet:
         if len(new) == 0:
             return 0
         hist = np.zeros((len(new), B.N_HIST))
-        hist[:, B.H_SEP] = np.maximum(-delta[new], 0.0)
+        # H_SEP: the separation, or (Burgers in compression) the elongation -delta at installation
+        both = (self.prm[model[new], B.B_KIND] == B.BURGERS) & (self.prm[model[new], B.B_COMP] != 0.0)
+        hist[:, B.H_SEP] = np.where(both, -delta[new], np.maximum(-delta[new], 0.0))
         if stress_free:
             cb = self.prm[model[new], B.B_KIND] == B.CONTACT_BOND
             hist[:, B.H_D0] = np.where(cb, delta[new], 0.0)

@@ -37,7 +37,11 @@ Models (``B_KIND`` of a model row, PFC's bond models; Potyondy & Cundall 2004):
   delta >= 0; normal tension and shear each a Burgers element (Maxwell spring K_m and
   dashpot C_m in series with a Kelvin spring K_k parallel to a dashpot C_k), advanced by
   the exact step map of :func:`burgers_coefficients`; optional strengths (N) as for the
-  contact bond.
+  contact bond. With ``compression: burgers`` (``B_COMP`` = 1) the normal element is one
+  Burgers element in compression and tension alike: its elongation u = -(delta - delta_i)
+  (delta_i the overlap at installation, so a bond is installed unloaded), its force s
+  (elongation positive) advanced by the same step map for du = u_1 - u_0, F_n = -s; a
+  sinusoidal u = U e^{i w t} gives s = K*(w) u with 1/K* = 1/K_m + 1/(i w C_m) + 1/(K_k + i w C_k).
 
 History of a bond (columns ``H_*`` of ``hist``): the force on i split into its normal
 part (tension element force for Burgers) and shear vector, the twist and bending moments,
@@ -74,12 +78,13 @@ B_KMS = 12     # Burgers, shear: Maxwell spring [N/m]
 B_CMS = 13
 B_KKS = 14
 B_CKS = 15
-N_BPARAMS = 16
+B_COMP = 16    # Burgers, normal compression: 0 elastic (k_n), 1 the normal Burgers element (as in tension)
+N_BPARAMS = 17
 # the kernel's table appends the Burgers step coefficients for the stage's time step
 # (:func:`burgers_coefficients`, 6 per direction: phi00 phi01 phi10 phi11 g0 g1)
-B_COEF_N = 16  # normal tension
-B_COEF_S = 22  # shear
-N_BTABLE = 28
+B_COEF_N = 17  # normal (tension, or both signs with B_COMP = 1)
+B_COEF_S = 23  # shear
+N_BTABLE = 29
 
 # columns of the bond history hist[b, :]
 H_FN = 0       # normal force on i [N], compression positive (Burgers: tension element force, >= 0 pulls)
@@ -88,7 +93,8 @@ H_MT = 4       # twist moment on i about n [N m] (parallel bond)
 H_MB = 5       # bending moment on i [N m], 3 columns (parallel bond)
 H_UKN = 8      # Kelvin displacement, normal tension [m] (Burgers)
 H_UKS = 9      # Kelvin displacement, shear [m], 3 columns (Burgers)
-H_SEP = 12     # separation max(-delta, 0) at the last step [m] (Burgers)
+H_SEP = 12     # separation max(-delta, 0) at the last step [m] (Burgers; B_COMP = 1: the elongation -delta
+               # from the bond's installed state, signed)
 H_D0 = 13      # reference overlap delta_0 [m] (contact bond; 0: installed loaded; kept when it breaks)
 N_HIST = 14
 
@@ -181,6 +187,42 @@ def _rotate_vec(h, b, col, nx, ny, nz):
 
 
 @njit(inline="always")
+def _burgers_normal(bprm, m, hist, b, u, du, dt):
+    """Advance bond b's normal Burgers element by the elongation increment du [m] to the
+    elongation u [m] (stored in ``H_SEP``); returns (F_n on i [N], compression positive, the
+    energy dissipated [J])."""
+    t1, uk1, ed = burgers_step(hist[b, H_FN], hist[b, H_UKN], du, dt, bprm, m, B_COEF_N, bprm[m, B_KMN], bprm[m, B_KKN])
+    hist[b, H_FN] = t1
+    hist[b, H_UKN] = uk1
+    hist[b, H_SEP] = u
+    return -t1, ed
+
+
+@njit(inline="always")
+def _burgers_shear(bprm, m, hist, b, sx, sy, sz, vtx, vty, vtz, nx, ny, nz, dt):
+    """Advance bond b's shear Burgers elements (one per axis: the element's elongation is
+    i's tangential displacement v_t dt, its force -F_s); returns (F_s on i [N], dissipated [J])."""
+    kx, ky, kz = _rotate_vec(hist, b, H_UKS, nx, ny, nz)
+    ex, kx, ed0 = burgers_step(-sx, kx, vtx * dt, dt, bprm, m, B_COEF_S, bprm[m, B_KMS], bprm[m, B_KKS])
+    ey, ky, ed1 = burgers_step(-sy, ky, vty * dt, dt, bprm, m, B_COEF_S, bprm[m, B_KMS], bprm[m, B_KKS])
+    ez, kz, ed2 = burgers_step(-sz, kz, vtz * dt, dt, bprm, m, B_COEF_S, bprm[m, B_KMS], bprm[m, B_KKS])
+    hist[b, H_UKS] = kx
+    hist[b, H_UKS + 1] = ky
+    hist[b, H_UKS + 2] = kz
+    return -ex, -ey, -ez, ed0 + ed1 + ed2
+
+
+@njit(inline="always")
+def _burgers_state(bprm, m, fn, sx, sy, sz):
+    """INTACT, or the mode a Burgers bond with these forces [N] breaks in (strengths in N)."""
+    if -fn >= bprm[m, B_SN]:
+        return BROKEN_TENSION
+    if sx * sx + sy * sy + sz * sz >= bprm[m, B_SS] * bprm[m, B_SS]:
+        return BROKEN_SHEAR
+    return INTACT
+
+
+@njit(inline="always")
 def bond_energy(bprm, m, hist, b, delta, ri, rj):
     """Elastic energy stored in bond b of model m (row of bprm) [J] (springs only; dashpots
     store none)."""
@@ -198,7 +240,7 @@ def bond_energy(bprm, m, hist, b, delta, ri, rj):
                       + hist[b, H_MT] ** 2 / (bprm[m, B_PKS] * 2.0 * inert) + mb2 / (bprm[m, B_PKN] * inert))
     uks2 = hist[b, H_UKS] ** 2 + hist[b, H_UKS + 1] ** 2 + hist[b, H_UKS + 2] ** 2
     e = 0.5 * fs2 / bprm[m, B_KMS] + 0.5 * bprm[m, B_KKS] * uks2
-    if delta >= 0.0:
+    if delta >= 0.0 and bprm[m, B_COMP] == 0.0:
         return e + 0.5 * bprm[m, B_KN] * delta * delta
     return e + 0.5 * hist[b, H_FN] ** 2 / bprm[m, B_KMN] + 0.5 * bprm[m, B_KKN] * hist[b, H_UKN] ** 2
 
@@ -269,6 +311,12 @@ def bond_law(bprm, m, hist, b, delta, nx, ny, nz, vx, vy, vz, wx, wy, wz, ri, rj
         mx = mt * nx + bx
         my = mt * ny + by
         mz = mt * nz + bz
+    elif bprm[m, B_COMP] != 0.0:  # BURGERS, one normal element in compression and tension
+        fn, ed = _burgers_normal(bprm, m, hist, b, -delta, -delta - hist[b, H_SEP], dt)
+        e_diss += ed
+        sx, sy, sz, ed = _burgers_shear(bprm, m, hist, b, sx, sy, sz, vtx, vty, vtz, nx, ny, nz, dt)
+        e_diss += ed
+        state = _burgers_state(bprm, m, fn, sx, sy, sz)
     else:  # BURGERS
         sep = -delta if delta < 0.0 else 0.0
         if delta >= 0.0:  # compression: elastic; the tension element restarts unloaded
@@ -284,29 +332,12 @@ def bond_law(bprm, m, hist, b, delta, nx, ny, nz, vx, vy, vz, wx, wy, wz, ri, rj
             hist[b, H_FN] = 0.0
             hist[b, H_UKN] = 0.0
         else:
-            t1, uk1, ed = burgers_step(hist[b, H_FN], hist[b, H_UKN], sep - hist[b, H_SEP], dt, bprm, m, B_COEF_N,
-                                       bprm[m, B_KMN], bprm[m, B_KKN])
-            hist[b, H_FN] = t1
-            hist[b, H_UKN] = uk1
+            fn, ed = _burgers_normal(bprm, m, hist, b, sep, sep - hist[b, H_SEP], dt)
             e_diss += ed
-            fn = -t1
         hist[b, H_SEP] = sep
-        # shear: the element's elongation is i's tangential displacement, its force -F_s
-        kx, ky, kz = _rotate_vec(hist, b, H_UKS, nx, ny, nz)
-        ex, kx, ed0 = burgers_step(-sx, kx, vtx * dt, dt, bprm, m, B_COEF_S, bprm[m, B_KMS], bprm[m, B_KKS])
-        ey, ky, ed1 = burgers_step(-sy, ky, vty * dt, dt, bprm, m, B_COEF_S, bprm[m, B_KMS], bprm[m, B_KKS])
-        ez, kz, ed2 = burgers_step(-sz, kz, vtz * dt, dt, bprm, m, B_COEF_S, bprm[m, B_KMS], bprm[m, B_KKS])
-        e_diss += ed0 + ed1 + ed2
-        sx = -ex
-        sy = -ey
-        sz = -ez
-        hist[b, H_UKS] = kx
-        hist[b, H_UKS + 1] = ky
-        hist[b, H_UKS + 2] = kz
-        if -fn >= bprm[m, B_SN]:
-            state = BROKEN_TENSION
-        elif sx * sx + sy * sy + sz * sz >= bprm[m, B_SS] * bprm[m, B_SS]:
-            state = BROKEN_SHEAR
+        sx, sy, sz, ed = _burgers_shear(bprm, m, hist, b, sx, sy, sz, vtx, vty, vtz, nx, ny, nz, dt)
+        e_diss += ed
+        state = _burgers_state(bprm, m, fn, sx, sy, sz)
     if kind != BURGERS:
         hist[b, H_FN] = fn
     hist[b, H_FS] = sx

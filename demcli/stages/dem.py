@@ -141,8 +141,12 @@ BOND_MODEL = Tagged("model", {
                              doc="a bonded disc beside the contact: force and moment; strengths in Pa"),
     "burgers": Section({"materials": _MATS,
                         "kn": Float("N/m", min=0, min_inclusive=False, doc="normal stiffness in compression"),
-                        "tension": _DASHPOT, "shear": _DASHPOT, **_STRENGTHS},
-                       doc="seed 003: compression elastic, normal tension and shear Burgers; strengths in N"),
+                        "tension": _DASHPOT, "shear": _DASHPOT, **_STRENGTHS,
+                        "compression": Str(choices=("elastic", "burgers"), default="elastic",
+                                           doc="normal compression: elastic (kn), or the tension element "
+                                               "(one Burgers element in compression and tension alike)")},
+                       doc="seed 003: compression elastic (or Burgers), normal tension and shear Burgers; "
+                           "strengths in N"),
 }, doc="a bond model for one material pair")
 
 BOND_MODELS = List(BOND_MODEL, min_len=1, doc="bond models by material pair (replace stored ones of that pair)")

@@ -1,0 +1,281 @@
+"""Dynamic modulus test (AASHTO T 342 style) on a bonded specimen: stage ``dynamic_modulus``.
+
+The specimen sits between two frictionless platens (plane walls, as in ``creep``); the top
+platen carries a haversine axial stress at each frequency f of ``frequencies`` in turn,
+
+    sigma(t) = sigma_c + sigma_a (1 - cos(2 pi f (t - T_f))) / 2      [Pa, compression positive],
+
+through the wall force motion F(t) = F_0 + F_1 sin(2 pi f (t - T_f) + phi) with
+F_0 = (sigma_c + sigma_a / 2) A, F_1 = sigma_a A / 2 and phi = -pi / 2 (A the specimen's section,
+T_f the frequency's start). Each frequency runs ``conditioning_cycles`` then ``cycles`` measured
+cycles, recorded ``points_per_cycle`` times per cycle of the highest frequency. Over the measured
+cycles, stress and axial strain e = 1 - h / H_0 (h the platens' distance, compression positive)
+are each fitted by least squares with
+
+    y(t) = a_0 + a_1 t + A cos(w t) + B sin(w t),   w = 2 pi f,
+
+the drift a_1 t taking up the creep under the mean stress. With y = a_0 + a_1 t + Y cos(w t - p),
+Y = sqrt(A^2 + B^2), p = atan2(B, A): the dynamic modulus |E*| = Y_sigma / Y_e [Pa] and the phase
+angle delta = p_e - p_sigma [deg] (the strain's lag behind the stress).
+
+Quasi-static check: a one-degree-of-freedom estimate of the specimen's axial natural frequency,
+f_n = sqrt(|E*| A / H_0 / (m_p + M / 3)) / (2 pi) (m_p the platen's mass, M the specimen's, both
+as integrated, mass scaling included); the response to a load at f is amplified by
+1 / (1 - (f / f_n)^2), so f / f_n above ``quasi_static_limit`` (0.1: 1 %) is logged as a warning.
+"""
+
+import math
+import time as _time
+
+import numpy as np
+
+from demcli.config.schema import Float, Int, List, Optional, Section, Str
+from demcli.errors import InputError
+from demcli.kernels import walls as W
+from demcli.stages import dem, loop
+from demcli.stages.base import ENGINE_KEEPS, ENGINE_OUTPUT, StageType, register_stage
+from demcli.state.fields import Field, register, register_group
+from demcli.state.records import describe_column
+
+for _name, _label, _unit, _disp, _scale, _table, _doc in [
+        ("stress", "Axial stress", "Pa", "kPa", 1e-3, "dem", "top platen's force over the section (compression "
+                                                              "positive)"),
+        ("modulus", "Dynamic modulus", "Pa", "MPa", 1e-6, "dynamic_modulus",
+         "magnitude of E*: stress over strain amplitude")]:
+    describe_column(_name, _label, _unit, _disp, _scale, table=_table, doc=_doc)
+describe_column("strain", "Axial strain", display="%", scale=100.0, table="dem",
+                doc="e = 1 - h / H_0 of the platens' distance (compression positive)")
+describe_column("phase_angle", "Phase angle", "deg", table="dynamic_modulus", doc="strain's lag behind the stress")
+describe_column("frequency", "Frequency", "Hz", table="dynamic_modulus", doc="loading frequency")
+
+register_group("dynamic_modulus_result", "Dynamic modulus per frequency (AASHTO T 342 style)",
+               writer="stage dynamic_modulus")
+for _name, _unit, _doc in [("frequency", "Hz", "loading frequencies, in the order run"),
+                           ("modulus", "Pa", "dynamic modulus (magnitude of E*) = stress amplitude / strain amplitude"),
+                           ("phase_angle", "deg", "lag of the strain behind the stress"),
+                           ("frequency_ratio", "1", "f / f_n (quasi-static measure)")]:
+    register(Field(f"dynamic_modulus_result/{_name}", "f", ("n_freq",), _unit, _doc, writer="stage dynamic_modulus"))
+
+
+def sinusoid_fit(t, y, frequency):
+    """Least-squares fit y ~ a_0 + a_1 (t - t_m) + A cos(w t) + B sin(w t), w = 2 pi f [Hz],
+    t_m the mean time [s].
+
+    Returns (amplitude sqrt(A^2 + B^2), phase atan2(B, A) [rad] of y = ... + Y cos(w t - p),
+    rms residual / amplitude).
+    """
+    t, y = np.asarray(t, float), np.asarray(y, float)
+    w = 2.0 * math.pi * frequency
+    m = np.column_stack([np.ones_like(t), t - t.mean(), np.cos(w * t), np.sin(w * t)])
+    coef, *_ = np.linalg.lstsq(m, y, rcond=None)
+    amp = float(math.hypot(coef[2], coef[3]))
+    res = float(np.sqrt(np.mean((m @ coef - y) ** 2)))
+    return amp, float(math.atan2(coef[3], coef[2])), res / amp if amp > 0 else math.inf
+
+
+def complex_modulus(t, stress, strain, frequency):
+    """(|E*| [Pa], phase angle [deg], larger of the two fits' residual / amplitude) from stress
+    [Pa] and strain [-] series (compression positive) over whole cycles at ``frequency`` [Hz]:
+    |E*| = Y_sigma / Y_e, delta = p_e - p_sigma wrapped into (-180, 180]."""
+    ys, ps, rs = sinusoid_fit(t, stress, frequency)
+    ye, pe, re = sinusoid_fit(t, strain, frequency)
+    lag = math.degrees(pe - ps)
+    lag = (lag + 180.0) % 360.0 - 180.0
+    return ys / ye, (180.0 if lag == -180.0 else lag), max(rs, re)
+
+
+def schedule(frequencies, n_cycles, records_per_s):
+    """First record of each frequency and the total record count: frequency k spans
+    ceil(n_cycles r / f_k) record intervals, r [1/s] the records per second."""
+    counts = [int(math.ceil(n_cycles * records_per_s / f - 1e-9)) for f in frequencies]
+    return np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+
+
+def _fields():
+    f = {k: v for k, v in dem.FIELDS.items() if k not in ("walls", "stop", "time")}
+    f.update({
+        "frequencies": List(Float("Hz", min=0, min_inclusive=False), min_len=1,
+                            doc="loading frequencies, run in the order given (AASHTO: high to low)"),
+        "stress": Section({"contact": Float("Pa", min=0, doc="sigma_c: the stress between the haversines"),
+                           "amplitude": Float("Pa", min=0, min_inclusive=False, doc="sigma_a: peak to trough")},
+                          doc="haversine axial stress sigma_c + sigma_a (1 - cos(2 pi f t)) / 2, compression"),
+        "conditioning_cycles": Int(min=0, default=2, doc="cycles before the measured ones at each frequency"),
+        "cycles": Int(min=5, default=5, doc="measured cycles at each frequency"),
+        "points_per_cycle": Int(min=8, default=40, doc="records per cycle of the highest frequency"),
+        "platen_material": Str(doc="platen material; make its friction 0"),
+        "load_mass": Optional(Float("kg", min=0, min_inclusive=False),
+                              doc="mass of the top platen (default: 1 % of the specimen's, as integrated)"),
+        "section": Str(choices=("specimen", "box"), default="specimen",
+                       doc="specimen: the cylinder of the input's bonded_specimen group (a prepare stage); box: "
+                           "the spheres' bounding box (a prism specimen, e.g. a lattice)"),
+        "quasi_static_limit": Float(min=0, min_inclusive=False, default=0.1,
+                                    doc="warn when f / f_n exceeds it (f_n: the axial natural frequency)"),
+        "time": Section({
+            "dt": Optional(Float("s", min=0, min_inclusive=False), doc="explicit time step (default: auto)"),
+            "dt_factor": Float(min=0, max=1, min_inclusive=False, default=0.2),
+        }, default={}),
+    })
+    return f
+
+
+def specimen_geometry(cfg, groups):
+    """(section area [m^2], height H_0 [m], centre of the bottom platen (3,) [m], half-widths
+    (x, y) of the platens [m]) from the bonded_specimen group or the spheres' bounding box."""
+    x = np.asarray(groups["bodies"]["x"])
+    if cfg.section == "box":
+        r = np.asarray(groups["spheres"]["radius"])
+        lo, hi = (x - r[:, None]).min(axis=0), (x + r[:, None]).max(axis=0)
+        half = 0.5 * (hi[:2] - lo[:2])
+        return float(4 * half[0] * half[1]), float(hi[2] - lo[2]), np.r_[0.5 * (lo[:2] + hi[:2]), lo[2]], half
+    sp = groups.get("bonded_specimen")
+    if sp is None:
+        raise InputError("its input has no bonded_specimen group (written by a prepare stage): run a prepare "
+                         "stage first, or give section: box for a prism specimen")
+    r0, h0 = float(sp["radius"]), float(sp["height"])
+    c = x[:, :2].mean(axis=0)
+    return math.pi * r0 * r0, h0, np.array([c[0], c[1], float(sp["base_z"])]), np.array([r0, r0])
+
+
+def _walls(cfg, base, h0, half, area, mload):
+    """The two platens; the top one carries the first frequency's haversine."""
+    from demcli.config.schema import Node
+
+    sc, sa = cfg.stress.contact, cfg.stress.amplitude
+    lo, hi = np.r_[-half, 0.0], np.r_[half, 0.0]
+    top = base + [0, 0, h0]
+    motion = Node({"mode": "force", "force": (sc + 0.5 * sa) * area, "amplitude": 0.5 * sa * area,
+                   "frequency": cfg.frequencies[0], "phase": -0.5 * math.pi, "start": 0.0, "mass": mload,
+                   "weight": False})
+    return [Node({"type": "plane", "name": "bottom", "point": tuple(base), "normal": (0.0, 0.0, 1.0),
+                  "material": cfg.platen_material, "motion": None, "lay_on_particles": None,
+                  "extent": tuple(np.r_[base + lo, base + hi])}),
+            Node({"type": "plane", "name": "top", "point": tuple(top), "normal": (0.0, 0.0, -1.0),
+                  "material": cfg.platen_material, "lay_on_particles": None, "motion": motion,
+                  "extent": tuple(np.r_[top + lo, top + hi])})]
+
+
+class _Loading:
+    """The frequency schedule on the record grid: which haversine the top platen carries at
+    each record, and the wall-clock time each frequency took."""
+
+    def __init__(self, cfg):
+        self.f = np.asarray(cfg.frequencies, float)
+        self.n = cfg.conditioning_cycles + cfg.cycles
+        self.rate = float(self.f.max() * cfg.points_per_cycle)  # records per second
+        self.first = schedule(self.f, self.n, self.rate)
+        self.rec_every = 1
+        self.clock = {}
+
+    def timing(self, system, dt, dt_crit):
+        """dt [s] cut so that a whole number of steps spans each record interval 1 / rate."""
+        self.rec_every = max(1, int(math.ceil(1.0 / (self.rate * dt) - 1e-9)))
+        return 1.0 / (self.rate * self.rec_every), int(self.first[-1]) * self.rec_every, self.rec_every
+
+    def segment(self, step):
+        """The frequency index at this step (the last one at the end)."""
+        rec = step // self.rec_every
+        return min(int(np.searchsorted(self.first, rec, side="right")) - 1, len(self.f) - 1)
+
+    def apply(self, system):
+        """Set the top platen's haversine for the current step's frequency."""
+        k = self.segment(system.step)
+        system.walls.prm[1, W.W_FREQ] = self.f[k]
+        system.walls.prm[1, W.W_START] = self.first[k] / self.rate
+        self.clock.setdefault(k, (_time.perf_counter(), system.step))
+        return k
+
+    def window(self, k, cond):
+        """(t_0, t_1) [s]: the measured cycles of frequency k."""
+        t0 = self.first[k] / self.rate
+        return t0 + cond / self.f[k], t0 + self.n / self.f[k]
+
+
+def _results(cfg, load, rows, area, h0, m_eff):
+    """Per-frequency rows: |E*|, phase angle, fit residual, f / f_n, steps, wall time."""
+    out = []
+    t = np.asarray(rows["time"])
+    for k, f in enumerate(load.f):
+        t0, t1 = load.window(k, cfg.conditioning_cycles)
+        tol = 0.25 / load.rate
+        sel = (t >= t0 - tol) & (t <= t1 + tol)
+        mod, phase, res = complex_modulus(t[sel], rows["stress"][sel], rows["strain"][sel], f)
+        fn = math.sqrt(mod * area / h0 / m_eff) / (2.0 * math.pi)
+        c0, s0 = load.clock.get(k, (math.nan, 0))  # (a resumed run: the time since it resumed)
+        c1, s1 = load.clock.get(k + 1, load.clock["end"])
+        out.append({"frequency": f, "modulus": mod, "phase_angle": phase, "fit_residual": res,
+                    "frequency_ratio": f / fn, "steps": int(load.first[k + 1] - load.first[k]) * load.rec_every,
+                    "wall_time": c1 - c0, "steps_timed": s1 - s0})
+    return out
+
+
+def run_dynamic_modulus(ctx, cfg, state_in):
+    """The stage: platens, the haversine schedule, records and the fitted |E*| and phase."""
+    from demcli.config.schema import Node
+    from demcli.state import RecordTable
+
+    try:
+        area, h0, base, half = specimen_geometry(cfg, state_in.groups)
+    except InputError as e:
+        raise InputError(f"stage {ctx.name}: {e}") from None
+    mspec = float(np.sum(state_in.groups["bodies"]["mass"])) * cfg.scaling.mass
+    mload = cfg.load_mass if cfg.load_mass is not None else 0.01 * mspec
+    load = _Loading(cfg)
+    dcfg = dict(cfg)
+    dcfg["walls"] = _walls(cfg, base, h0, half, area, mload)
+    dcfg["stop"] = None
+    dcfg["time"] = Node({"duration": None, "steps": 1, "dt": cfg.time.dt, "dt_factor": cfg.time.dt_factor})
+    cols = {"stress": "Pa", "strain": "1", "frequency": "Hz"}
+    n_s = len(state_in.groups["spheres"]["radius"])
+
+    def row(system):
+        k = load.apply(system)
+        h = float(system.wpoint[1, 2] - system.wpoint[0, 2])
+        return {"stress": float(-system.wforce[1] @ system.walls.normal[1]) / area, "strain": 1.0 - h / h0,
+                "frequency": float(load.f[k])}
+
+    def finish(ctx_, system, state, table):
+        load.clock["end"] = (_time.perf_counter(), system.step)
+        rows = {k: np.asarray(v) for k, v in table.to_arrays().items()}
+        series = RecordTable("series", {"time": "s", "stress": "Pa", "strain": "1"})
+        for k in range(len(rows["time"])):
+            series.append({n: rows[n][k] for n in ("time", "stress", "strain")})
+        ctx_.write_records(series, x="time", ys=["strain"])
+        res = _results(cfg, load, rows, area, h0, mload + mspec / 3.0)
+        t = RecordTable("dynamic_modulus", {"frequency": "Hz", "modulus": "Pa", "phase_angle": "deg",
+                                            "fit_residual": "1", "frequency_ratio": "1", "steps": "1",
+                                            "wall_time": "s"})
+        _report(ctx_, cfg, res, n_s)
+        for r in res:
+            t.append(r)
+        t.to_state(state)
+        ctx_.write_records(t, x="frequency", ys=["modulus", "phase_angle"], logx=True)
+        state.groups["dynamic_modulus_result"] = {n: np.array([r[n] for r in res], float) for n in
+                                                  ("frequency", "modulus", "phase_angle", "frequency_ratio")}
+        for grp in ("bonded_specimen",):
+            if grp in state_in.groups:
+                state.groups[grp] = dict(state_in.groups[grp])
+
+    hooks = loop.Hooks(columns=cols, row=row, finish=finish, timing=load.timing,
+                       start=lambda system, ckpt: load.apply(system))
+    return loop.integrate(ctx, Node(dcfg), state_in, hooks)
+
+
+def _report(ctx, cfg, res, n_s):
+    """One log line per frequency (|E*|, phase, fit, f / f_n, particle-steps/s) and the warnings."""
+    for r in res:
+        timed = r.pop("steps_timed")
+        speed = n_s * timed / r["wall_time"] if r["wall_time"] > 0 else math.nan
+        ctx.log(f"f = {r['frequency']:g} Hz: |E*| = {r['modulus'] / 1e6:.5g} MPa, phase {r['phase_angle']:.3f} deg, "
+                f"fit residual {r['fit_residual']:.2g}, f/f_n = {r['frequency_ratio']:.3g}; {r['steps']} steps, "
+                f"{speed:.3g} particle-steps/s")
+        if r["frequency_ratio"] > cfg.quasi_static_limit:
+            ctx.log(f"warning: f = {r['frequency']:g} Hz is not quasi-static: f/f_n = {r['frequency_ratio']:.3g} > "
+                    f"{cfg.quasi_static_limit:g} (inertia amplifies the strain by 1/(1-(f/f_n)^2) = "
+                    f"{1.0 / abs(1.0 - r['frequency_ratio'] ** 2):.4g}); lighten the platen or the mass scaling")
+
+
+register_stage(StageType(
+    "dynamic_modulus", _fields(), run_dynamic_modulus, needs_input=True,
+    provides=ENGINE_OUTPUT + ("dynamic_modulus_result/*",), keeps=ENGINE_KEEPS + ("bonded_specimen",),
+    case_check=dem.scene_check,
+    doc="AASHTO T 342 style dynamic modulus: haversine stress at several frequencies, |E*| and phase angle"))
