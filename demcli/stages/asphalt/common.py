@@ -17,7 +17,13 @@ import math
 
 import numpy as np
 
+from demcli.config.schema import Float, Optional, Section
 from demcli.state.fields import Field, register, register_group
+
+TEST_TIME = Section({
+    "dt": Optional(Float("s", min=0, min_inclusive=False), doc="explicit time step (default: auto)"),
+    "dt_factor": Float(min=0, max=1, min_inclusive=False, default=0.2),
+}, default={}, doc="time step of a test stage (its length follows from the test)")
 
 SEEDS_WRITER = "stage place_spheres (updated by carve)"
 AGG_WRITER = "stage carve (updated by cut and mastic)"

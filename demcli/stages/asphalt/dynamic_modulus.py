@@ -33,6 +33,7 @@ from demcli.config.schema import Float, Int, List, Optional, Section, Str
 from demcli.errors import InputError
 from demcli.kernels import walls as W
 from demcli.stages import dem, loop
+from demcli.stages.asphalt.common import TEST_TIME
 from demcli.stages.base import ENGINE_KEEPS, ENGINE_OUTPUT, StageType, register_stage
 from demcli.state.fields import Field, register, register_group
 from demcli.state.records import describe_column
@@ -110,10 +111,7 @@ def _fields():
                            "the spheres' bounding box (a prism specimen, e.g. a lattice)"),
         "quasi_static_limit": Float(min=0, min_inclusive=False, default=0.1,
                                     doc="warn when f / f_n exceeds it (f_n: the axial natural frequency)"),
-        "time": Section({
-            "dt": Optional(Float("s", min=0, min_inclusive=False), doc="explicit time step (default: auto)"),
-            "dt_factor": Float(min=0, max=1, min_inclusive=False, default=0.2),
-        }, default={}),
+        "time": TEST_TIME,
     })
     return f
 

@@ -26,9 +26,10 @@ import math
 
 import numpy as np
 
-from demcli.config.schema import Float, Optional, Section, Str
+from demcli.config.schema import Float, Str
 from demcli.errors import InputError
 from demcli.stages import dem, loop
+from demcli.stages.asphalt.common import TEST_TIME
 from demcli.stages.base import ENGINE_KEEPS, ENGINE_OUTPUT, StageType, register_stage
 from demcli.state.fields import Field, register, register_group
 from demcli.state.records import describe_column
@@ -57,10 +58,7 @@ def _fields():
         "head_material": Str(doc="material of the loading heads"),
         "quasi_static": Float(min=0, min_inclusive=False, default=0.01,
                               doc="warn when the kinetic energy at the peak exceeds this share of the work"),
-        "time": Section({
-            "dt": Optional(Float("s", min=0, min_inclusive=False), doc="explicit time step (default: auto)"),
-            "dt_factor": Float(min=0, max=1, min_inclusive=False, default=0.2),
-        }, default={}),
+        "time": TEST_TIME,
     })
     return f
 

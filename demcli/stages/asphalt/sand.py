@@ -37,6 +37,7 @@ import numpy as np
 from demcli.config.schema import Float, Int, List, Optional, Section, Str, Tagged
 from demcli.errors import InputError, StageError
 from demcli.stages import dem, loop
+from demcli.stages.asphalt.common import TEST_TIME
 from demcli.stages.relax import cycle_to_equilibrium, unbalanced
 from demcli.stages.base import ENGINE_KEEPS, ENGINE_OUTPUT, StageType, register_stage
 from demcli.stages.timing import time_step
@@ -287,10 +288,7 @@ def _creep_fields():
         "platen_material": Str(doc="platen (and triaxial cylinder) material; make its friction 0"),
         "load_mass": Optional(Float("kg", min=0, min_inclusive=False),
                               doc="mass of the top platen and of the membrane (default: 1 % of the specimen's)"),
-        "time": Section({
-            "dt": Optional(Float("s", min=0, min_inclusive=False), doc="explicit time step (default: auto)"),
-            "dt_factor": Float(min=0, max=1, min_inclusive=False, default=0.2),
-        }, default={}),
+        "time": TEST_TIME,
         "dilation_window": List(Float(min=0), min_len=2, max_len=2, default=(0.01, 0.04),
                                 doc="distortional strains between which the dilation gradient is fitted"),
     })
