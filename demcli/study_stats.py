@@ -159,11 +159,13 @@ def _numbers(texts):
 
 
 def _series(varies, settings):
-    """{label of the other paths' values: [settings]} for the plot's lines."""
-    labels = _labels(varies)
+    """{label of the other grid axes' values: [settings]} for the plot's lines (a path varied along
+    with the first one is the same axis, so it makes no line of its own)."""
+    kept = [v for v in varies if not v.realisation]
+    heads = [k for k, v in enumerate(kept) if not v.along and v.group != kept[0].group]
     series = {}
     for s in settings:
-        key = ", ".join(f"{lab}={val}" for lab, val in zip(labels[1:], s.values[1:]))
+        key = ", ".join(f"{kept[k].label}={s.values[k]}" for k in heads)
         series.setdefault(key, []).append(s)
     return series
 
@@ -197,11 +199,11 @@ def write_settings_plot(path_png, case, varies, settings, metric_name, unit):
             for xi, s in zip(x, pts):
                 ax.plot(np.full(s.n, xi), s.metrics, ".", color=color, alpha=0.5, markersize=5)
             ax.set_xlabel(xlabel)
-    for ax in axes:
+    spans = [[s.wall_time for s in settings if math.isfinite(s.wall_time)], xs or []]
+    for ax, span in zip(axes, spans):
         ax.set_ylabel(ylabel)
         ax.grid(True, which="both", alpha=0.3)
-        lo, hi = ax.get_xlim()
-        if lo > 0 and hi / lo > 20:
+        if span and min(span) > 0 and max(span) / min(span) >= 10:  # a decade or more: log axis
             ax.set_xscale("log")
     real = _realisation(varies)
     fig.suptitle(f"{Path(case).stem}: mean +- standard deviation over {real.label} = {', '.join(real.values)} "

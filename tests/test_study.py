@@ -458,3 +458,18 @@ def test_a_study_with_realisations_reports_each_setting(tmp_path):
     ref_mean = float(settings[1]["time@last_mean[s]"])
     for r in runs:
         assert float(r["error[s]"]) == pytest.approx(float(r["time@last[s]"]) - ref_mean, abs=1e-18)
+
+
+def test_paths_varied_together_make_one_line_of_the_settings_plot(tmp_path):
+    from demcli.study import Row
+    from demcli.study_stats import _series, aggregate, write_settings_plot
+
+    # Given a stiffness varied in two stages together, crossed with a count, three seeds each
+    varies, variants = make_variants([parse_vary("stages.a.k=0.001,0.01"), parse_vary("+stages.b.k=0.001,0.01"),
+                                      parse_vary("stages.a.n=10,20"), parse_realisations("seed=1,2,3")])
+    rows = [Row(v, metric=float(k), wall_time=1.0 + k) for k, v in enumerate(variants)]
+    settings, _ = aggregate(varies, rows, len(rows) - 1)
+    # Then the plot has one line per count, each through both stiffnesses (the paired path is no line)
+    series = _series(varies, settings)
+    assert sorted(series) == ["n=10", "n=20"] and all(len(s) == 2 for s in series.values())
+    assert write_settings_plot(tmp_path / "s.png", "case.yaml", varies, settings, "x@last", "m")
