@@ -314,9 +314,6 @@ def bond_law(bprm, m, hist, b, delta, nx, ny, nz, vx, vy, vz, wx, wy, wz, ri, rj
     elif bprm[m, B_COMP] != 0.0:  # BURGERS, one normal element in compression and tension
         fn, ed = _burgers_normal(bprm, m, hist, b, -delta, -delta - hist[b, H_SEP], dt)
         e_diss += ed
-        sx, sy, sz, ed = _burgers_shear(bprm, m, hist, b, sx, sy, sz, vtx, vty, vtz, nx, ny, nz, dt)
-        e_diss += ed
-        state = _burgers_state(bprm, m, fn, sx, sy, sz)
     else:  # BURGERS
         sep = -delta if delta < 0.0 else 0.0
         if delta >= 0.0:  # compression: elastic; the tension element restarts unloaded
@@ -335,10 +332,11 @@ def bond_law(bprm, m, hist, b, delta, nx, ny, nz, vx, vy, vz, wx, wy, wz, ri, rj
             fn, ed = _burgers_normal(bprm, m, hist, b, sep, sep - hist[b, H_SEP], dt)
             e_diss += ed
         hist[b, H_SEP] = sep
+    if kind == BURGERS:  # shear and strengths alike in both normal laws (inlined once)
         sx, sy, sz, ed = _burgers_shear(bprm, m, hist, b, sx, sy, sz, vtx, vty, vtz, nx, ny, nz, dt)
         e_diss += ed
         state = _burgers_state(bprm, m, fn, sx, sy, sz)
-    if kind != BURGERS:
+    else:
         hist[b, H_FN] = fn
     hist[b, H_FS] = sx
     hist[b, H_FS + 1] = sy
