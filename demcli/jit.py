@@ -10,17 +10,50 @@ kernel compiles (numba's default picks TBB where it is installed, which scales p
 for these loops). ``NUMBA_DISABLE_JIT=1`` runs the kernels as Python for coverage.
 """
 
+import gc
 import hashlib
 import math
 import os
 from pathlib import Path
 
 import numba
+from numba.core import event
 
 _CACHE = os.environ.get("DEMCLI_NUMBA_CACHE", "1") != "0"
 
 if os.environ.get("NUMBA_THREADING_LAYER") is None:
     numba.config.THREADING_LAYER = "omp"
+
+COMPILE_GC_THRESHOLD = (200_000, 50, 1_000)
+"""Python's garbage-collector thresholds while numba compiles. Numba's front end allocates
+millions of short-lived objects (IR nodes, deep copies of inlined functions' IR, typing
+templates); at Python's default (700, 10, 10) a full collection runs every ~70 000 net
+allocations and scans every live object, the compiler's own growing heap included. With
+these thresholds a cold compile of the polyhedral smoke case holds the compiler 12 % less
+(50.1 -> 44.2 s, 2 alternated pairs, bench/README.md)."""
+
+
+class _CompileGC(event.Listener):
+    """Raises the collector's thresholds from the start of the outermost numba compile to its
+    end (nested compiles of callees included), then restores the caller's."""
+
+    def __init__(self):
+        self.depth = 0
+        self.saved = gc.get_threshold()
+
+    def on_start(self, ev):
+        if self.depth == 0:
+            self.saved = gc.get_threshold()
+            gc.set_threshold(*COMPILE_GC_THRESHOLD)
+        self.depth += 1
+
+    def on_end(self, ev):
+        self.depth -= 1
+        if self.depth == 0:
+            gc.set_threshold(*self.saved)
+
+
+event.register("numba:compile", _CompileGC())
 
 
 def kernel_digest():
