@@ -29,11 +29,10 @@ def brute_closest(p, a, b, c, n=400):
 def contacts(centre, r, verts, tris, cell):
     """(triangles, points, normals, overlaps) of one sphere, through the kernel."""
     grid = bin_triangles(verts, tris, cell)
-    mark = np.zeros(len(tris), np.int64)
-    t, q, n, d = (np.empty(MAX_TOUCH, np.int64), np.empty((MAX_TOUCH, 3)), np.empty((MAX_TOUCH, 3)),
+    t, q, n, s = (np.empty(MAX_TOUCH, np.int64), np.empty((MAX_TOUCH, 3)), np.empty((MAX_TOUCH, 3)),
                   np.empty(MAX_TOUCH))
-    k = sphere_mesh_contacts(np.asarray(centre, float), r, verts, tris, *grid, cell, mark, 1, t, q, n, d)
-    return t[:k], q[:k], n[:k], d[:k]
+    k = sphere_mesh_contacts(np.asarray(centre, float), r, verts, tris, *grid, cell, t, q, n, s)
+    return t[:k], q[:k], n[:k], r - s[:k]
 
 
 def test_closest_point_matches_brute_force():
