@@ -2,7 +2,8 @@
 gives the plane's forces and trajectories bit for bit (spheres on a face, on an edge and on a
 vertex shared by four triangles, a clump bed), a moving flat mesh (velocity, force, servo) pushes
 a sphere onto a floor as the moving plane does, the mesh is drawn in the snapshots where it is,
-and bad mesh settings are configuration errors (exit code 2)."""
+a scene without mesh walls has size-0 mesh arrays, and bad mesh settings are configuration
+errors (exit code 2)."""
 
 import meshio
 import numpy as np
@@ -34,7 +35,7 @@ stages:
     physics: {gravity: [0, 0, -9.81], friction: true, energy: true}
     walls: [WALL]
     time: {steps: 3000, dt_factor: 0.2}
-    output: {records: 30, snapshots: 1}
+    output: {records: 30, snapshots: 1, contacts: {}}
 """
 PLANE = "{type: plane, name: floor, point: [0, 0, 0], normal: [0, 0, 1], material: m}"
 MESH = "{type: mesh, name: floor, file: fan.stl, material: m}"
@@ -56,15 +57,18 @@ def run(tmp_path, name, text):
 
 
 def same_run(a, b, stage):
-    """The two runs' final bodies and wall records are bit-identical."""
+    """The two runs' final bodies and their wall, dem (energies with the strain energy) and contact
+    records are bit-identical; returns the first's state and wall record."""
     sa, sb = read_state(a / f"01-{stage}.h5"), read_state(b / f"01-{stage}.h5")
     for key in ("bodies/x", "bodies/v", "bodies/omega", "bodies/force", "walls/force"):
         np.testing.assert_array_equal(sa[key], sb[key], err_msg=key)
-    ra, _ = read_record(a / "records" / f"{stage}_walls.csv")
-    rb, _ = read_record(b / "records" / f"{stage}_walls.csv")
-    for key in ra:
-        np.testing.assert_array_equal(ra[key], rb[key], err_msg=key)
-    return sa, ra
+    for table in ("walls", "dem", "contacts"):
+        if (a / "records" / f"{stage}_{table}.csv").exists():
+            ra, _ = read_record(a / "records" / f"{stage}_{table}.csv")
+            rb, _ = read_record(b / "records" / f"{stage}_{table}.csv")
+            for key in ra:
+                np.testing.assert_array_equal(ra[key], rb[key], err_msg=f"{table}: {key}")
+    return sa, read_record(a / "records" / f"{stage}_walls.csv")[0]
 
 
 def test_spheres_on_a_flat_mesh_move_as_on_the_plane(tmp_path):
@@ -74,8 +78,10 @@ def test_spheres_on_a_flat_mesh_move_as_on_the_plane(tmp_path):
     fan_stl(tmp_path)
     plane = run(tmp_path, "plane", BALLS.replace("WALL", PLANE))
     mesh = run(tmp_path, "mesh", BALLS.replace("WALL", MESH))
-    # Then forces, trajectories and the wall records are bit-identical (no feature counted twice)
+    # Then forces, trajectories, the wall and energy records and the recorded contacts (point,
+    # normal, overlap, force) are bit-identical: no feature counted twice
     state, rec = same_run(plane, mesh, "run")
+    assert len(read_record(mesh / "records" / "run_contacts.csv")[0]["j"]) > 30
     assert rec["floor.force"].max() > 0.9 * 4 * 2500 * 4 / 3 * np.pi * 0.005 ** 3 * 9.81   # the balls' weight
     assert abs(state["bodies/x"][0, 0] - 0.01) > 0.005                                      # it slid
 
@@ -130,6 +136,18 @@ def test_mesh_wall_is_drawn_where_it_is(tmp_path):
     assert len(tri) == 4 and np.allclose(back.points[tri][..., 2], z, rtol=0, atol=1e-15)
     assert z < 0.0102 - 1e-6 and z == pytest.approx(-rec["top.position"][-1], rel=1e-12)
     assert np.all(back.cell_data_dict["kind"]["triangle"] == 2)
+
+
+def test_scenes_without_mesh_walls_carry_size_0_mesh_arrays(build):
+    # Given a sphere on a plane wall: no mesh wall
+    from demcli.engine.system import Walls
+
+    s = build.sphere_system([[0, 0, 0.01]], [[0, 0, 0]], 0.01, [build.Material("m", 2500.0)],
+                            build.ContactModel(law="linear", kn=1e4, kt=0.0),
+                            walls=Walls.fixed_planes([(0, 0, 0)], [(0, 0, 1)]))
+    s.advance(10)
+    # Then every mesh array the kernels take has size 0 (nothing allocated for meshes)
+    assert all(a.size == 0 for a in s.kernel_walls().mesh)
 
 
 def _check(tmp_path, text, *needles, command="check"):
