@@ -577,6 +577,43 @@ def _mesh_row(w, where, case_file):
     return point, np.r_[verts.min(axis=0), verts.max(axis=0)], (np.ascontiguousarray(verts - point), tris)
 
 
+def _wall_control(motion, normal, area, cfg):
+    """(control mode, W_* parameter row, velocity [m/s]) of a wall's ``motion`` (None: fixed);
+    ``area`` [m^2] the loaded area servo and pressure walls take when the motion gives none; a
+    force wall's weight from ``cfg.physics.gravity`` along its ``normal``."""
+    from demcli.kernels import walls as W
+
+    prm = np.zeros(W.N_WPARAMS)
+    control = W.FIXED
+    v = np.zeros(3)
+    mode = motion.mode if motion is not None else "fixed"
+    if mode == "velocity":
+        control, v = W.VELOCITY, np.array(motion.velocity)
+    elif mode == "servo":
+        control = W.SERVO
+        prm[W.W_TARGET] = motion.stress
+        prm[W.W_GAIN] = motion.gain
+        prm[W.W_VMAX] = motion.max_speed
+        prm[W.W_AREA] = motion.area if motion.area is not None else area
+    elif mode == "pressure":
+        control = W.PRESSURE
+        prm[W.W_TARGET] = motion.pressure
+        prm[W.W_MASS] = motion.mass
+        prm[W.W_AREA] = motion.area if motion.area is not None else area
+    elif mode == "force":
+        control = W.FORCE
+        prm[W.W_TARGET] = motion.force
+        prm[W.W_AMPLITUDE] = motion.amplitude
+        prm[W.W_FREQ] = motion.frequency
+        prm[W.W_PHASE] = motion.phase
+        prm[W.W_START] = motion.start
+        prm[W.W_MASS] = motion.mass
+        if motion.weight:  # a constant force: the weight's component along the normal
+            g = np.asarray(cfg.physics.gravity, float)
+            prm[W.W_TARGET] += motion.mass * float(g @ (np.asarray(normal, float) / np.linalg.norm(normal)))
+    return control, prm, v
+
+
 def build_walls(cfg, case, case_file=None, where="walls"):
     """Walls of the stage config as arrays (box walls become up to six planes, mesh files are read:
     relative to ``case_file``'s folder, errors naming ``where``[k])."""
@@ -590,34 +627,7 @@ def build_walls(cfg, case, case_file=None, where="walls"):
         return bool(w.get("rigid", False))
 
     def add(name, kind, point, normal, radius, material, motion, extent, area, rigid, mesh=None):
-        prm = np.zeros(W.N_WPARAMS)
-        control = W.FIXED
-        v = np.zeros(3)
-        mode = motion.mode if motion is not None else "fixed"
-        if mode == "velocity":
-            control, v = W.VELOCITY, np.array(motion.velocity)
-        elif mode == "servo":
-            control = W.SERVO
-            prm[W.W_TARGET] = motion.stress
-            prm[W.W_GAIN] = motion.gain
-            prm[W.W_VMAX] = motion.max_speed
-            prm[W.W_AREA] = motion.area if motion.area is not None else area
-        elif mode == "pressure":
-            control = W.PRESSURE
-            prm[W.W_TARGET] = motion.pressure
-            prm[W.W_MASS] = motion.mass
-            prm[W.W_AREA] = motion.area if motion.area is not None else area
-        elif mode == "force":
-            control = W.FORCE
-            prm[W.W_TARGET] = motion.force
-            prm[W.W_AMPLITUDE] = motion.amplitude
-            prm[W.W_FREQ] = motion.frequency
-            prm[W.W_PHASE] = motion.phase
-            prm[W.W_START] = motion.start
-            prm[W.W_MASS] = motion.mass
-            if motion.weight:  # a constant force: the weight's component along the normal
-                g = np.asarray(cfg.physics.gravity, float)
-                prm[W.W_TARGET] += motion.mass * float(g @ (np.asarray(normal, float) / np.linalg.norm(normal)))
+        control, prm, v = _wall_control(motion, normal, area, cfg)
         n = np.asarray(normal, float)
         rows.append((name, kind, np.asarray(point, float), n / np.linalg.norm(n), radius, names.index(material),
                      control, prm, v, np.asarray(extent, float), rigid, mesh))
