@@ -14,6 +14,7 @@ from click.testing import CliRunner
 from demcli import run_case
 from demcli.cli import cli
 from demcli.compare import read_record
+from demcli.geometry.mesh_file import read_mesh
 from demcli.state import read_state
 
 CASES = __import__("pathlib").Path(__file__).resolve().parents[2] / "cases"
@@ -120,6 +121,43 @@ def test_clumps_on_a_flat_mesh_land_as_on_the_plane(tmp_path):
     # Then the clumps (members' contacts summed per body) land bit-identically
     state, rec = same_run(*runs, "settle")
     assert np.count_nonzero(rec["floor.force"] > 0.0) > 5      # clumps landed on the floor
+
+
+CRADLE = """\
+name: cradle
+materials:
+  m: {density: 2500 kg/m^3, young: 10 MPa, poisson: 0.25, friction: 0.0, restitution: 0.5}
+stages:
+  - name: ball
+    type: particles
+    particles: [{x: [1 mm, 0, -40 mm], radius: 5 mm, material: m}]
+  - name: run
+    type: dem
+    physics: {gravity: [0, 0, -9.81], local_damping: 0.7}
+    contact: {law: linear, kn: 1e4}
+    walls: [{type: mesh, name: head, file: HEAD, scale: 0.001, material: m}]
+    time: {duration: 1 s, dt_factor: 0.2}
+    output: {records: 10, snapshots: 0}
+"""
+
+
+def test_ball_rests_in_the_fold_of_the_marshall_head(tmp_path):
+    # Given a frictionless ball (r = 5 mm, linear springs k_n) dropped into the lower Marshall head,
+    # an arc of radius R = 50.8 mm in facets of 5 degrees with a fold (a concave edge) at its bottom
+    out = run(tmp_path, "cradle", CRADLE.replace("HEAD", str(CASES / "meshes" / "marshall_head.stl")))
+    st = read_state(out / "01-run.h5")
+    rec, _ = read_record(out / "records" / "run_walls.csv")
+    # Then it comes to rest on both facets of the fold: each pushes N = m g / (2 cos 2.5 deg) along its
+    # normal, overlap N / k_n, so its centre is at z = -R + (r - N / k_n) / cos 2.5 deg on the fold's plane
+    # (R as the binary STL holds it, in float32: 50.8 mm to 1.5e-8; its facet angles off by ~1e-7 rad
+    # there, 5e-10 of z)
+    radius = -read_mesh(CASES / "meshes" / "marshall_head.stl", scale=0.001)[0][:, 2].min()
+    m, c = st["bodies/mass"][0], np.cos(np.radians(2.5))
+    n = m * 9.81 / (2 * c)
+    assert st["bodies/x"][0, 2] == pytest.approx(-radius + (5e-3 - n / 1e4) / c, rel=2e-9)
+    assert abs(st["bodies/x"][0, 0]) < 1e-7 and abs(st["bodies/x"][0, 1]) < 1e-12
+    # and the head carries its weight (the sum of the two contacts)
+    assert rec["head.force"][-1] == pytest.approx(m * 9.81, rel=1e-12)
 
 
 def test_mesh_wall_is_drawn_where_it_is(tmp_path):
