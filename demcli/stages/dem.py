@@ -614,6 +614,15 @@ def _wall_control(motion, normal, area, cfg):
     return control, prm, v
 
 
+def check_mesh_files(cfg, case_file, where):
+    """Read the mesh walls' files of a stage config (relative to ``case_file``): a missing,
+    unreadable or degenerate one is a ConfigError naming ``where``[k].file (exit code 2), found
+    when the case is loaded rather than when its stage starts."""
+    for k, w in enumerate(cfg.get("walls", ())):
+        if w.type == "mesh":
+            _mesh_row(w, f"{where}[{k}]", case_file)
+
+
 def build_walls(cfg, case, case_file=None, where="walls"):
     """Walls of the stage config as arrays (box walls become up to six planes, mesh files are read:
     relative to ``case_file``'s folder, errors naming ``where``[k])."""

@@ -214,10 +214,11 @@ def test_bad_mesh_settings_are_config_errors(tmp_path, wall, needles):
     _check(tmp_path, BALLS.replace("WALL", wall), *needles)
 
 
-def test_unreadable_mesh_stops_the_run_with_a_config_error(tmp_path):
+def test_unreadable_mesh_stops_the_run_before_any_stage(tmp_path):
     (tmp_path / "fan.stl").write_text("solid broken\n  facet normal 0 0 1\n    outer loop\n")
     _check(tmp_path, BALLS.replace("WALL", MESH), "case.yaml", "stages[1].walls[0].file", "cannot read as STL",
            command="run")
+    assert not list(tmp_path.rglob("*.h5"))
 
 
 def test_mesh_wall_in_a_polyhedral_scene_is_refused(tmp_path):
