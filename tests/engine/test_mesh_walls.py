@@ -1,9 +1,12 @@
 """Mesh walls (``type: mesh``) run from case files against the analytic plane wall: a flat mesh
 gives the plane's forces and trajectories bit for bit (spheres on a face, on an edge and on a
 vertex shared by four triangles, a clump bed), a moving flat mesh (velocity, force, servo) pushes
-a sphere onto a floor as the moving plane does, the mesh is drawn in the snapshots where it is,
+a sphere onto a floor as the moving plane does, a ball rests in the fold of the Marshall head on
+two face contacts as the analytic equilibrium says, the mesh is drawn in the snapshots where it is,
 a scene without mesh walls has size-0 mesh arrays, and bad mesh settings are configuration
 errors (exit code 2)."""
+
+from pathlib import Path
 
 import meshio
 import numpy as np
@@ -17,7 +20,7 @@ from demcli.compare import read_record
 from demcli.geometry.mesh_file import read_mesh
 from demcli.state import read_state
 
-CASES = __import__("pathlib").Path(__file__).resolve().parents[2] / "cases"
+CASES = Path(__file__).resolve().parents[2] / "cases"
 
 BALLS = """\
 name: flat
