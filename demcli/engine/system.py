@@ -242,7 +242,7 @@ class System:
         self.wpoint = np.ascontiguousarray(walls.point, np.float64).copy()
         self.wpoint0 = self.wpoint.copy()
         self.wv = np.ascontiguousarray(walls.v, np.float64).copy()
-        self.wmesh = mesh_arrays(walls.mesh)  # size-0 arrays without mesh walls
+        self.wmesh = mesh_arrays(walls.mesh)  # None without mesh walls (the mesh path is not compiled)
 
     def angmom_from_omega(self):
         """L = R diag(I) R^T omega for each body (world frame), or the stored angular momentum."""

@@ -317,15 +317,14 @@ def cell_size(verts, tris):
 
 def mesh_arrays(meshes):
     """MeshArrays (:data:`demcli.kernels.layout.MeshArrays`) of the walls: ``meshes`` per wall
-    (vertices relative to the wall's point [m], triangles) or None (not a mesh wall); size-0 arrays
-    when no wall is a mesh (meshes None or all None)."""
+    (vertices relative to the wall's point [m], triangles) or None (not a mesh wall); None when no
+    wall is a mesh (meshes None or all None): nothing allocated, and the kernels compile without
+    the mesh path (:mod:`demcli.kernels.switch`)."""
     from demcli.kernels.layout import MeshArrays
 
     i64 = np.int64
     if meshes is None or all(m is None for m in meshes):
-        return MeshArrays(np.zeros((0, 3)), np.zeros((0, 3), i64), np.zeros(0, i64), np.zeros(0, i64),
-                          np.zeros((0, 3)), np.zeros((0, 3), i64), np.zeros(0), np.zeros(0, i64), np.zeros(0, i64),
-                          np.zeros(0, i64), np.zeros(0, i64))
+        return None
     nw = len(meshes)
     parts = {"verts": [], "tris": [], "cstart": [], "clist": []}
     lo, dims, cell = np.zeros((nw, 3)), np.ones((nw, 3), i64), np.ones(nw)

@@ -17,7 +17,7 @@ import numpy as np
 from numba import prange
 
 from demcli.jit import njit
-from demcli.kernels.walls import surface_distance
+from demcli.kernels.walls import surface_distance, wall_distance
 
 
 @njit
@@ -211,9 +211,13 @@ def _scan_walls(xs, rad, skin, wkind, wpoint, wnormal, wradius, mesh, start, wal
     for i in prange(n):
         k = start[i] if fill else 0
         for w in range(nw):
-            s, _, _, _ = surface_distance(wkind[w], wpoint[w, 0], wpoint[w, 1], wpoint[w, 2],
-                                          wnormal[w, 0], wnormal[w, 1], wnormal[w, 2], wradius[w],
-                                          xs[i, 0], xs[i, 1], xs[i, 2], mesh, w, rad[i] + skin)
+            if mesh is None:  # no mesh wall: the mesh path is not compiled (kernels/switch.py)
+                s, _, _, _ = wall_distance(wkind[w], wpoint[w, 0], wpoint[w, 1], wpoint[w, 2], wnormal[w, 0],
+                                           wnormal[w, 1], wnormal[w, 2], wradius[w], xs[i, 0], xs[i, 1], xs[i, 2])
+            else:
+                s, _, _, _ = surface_distance(wkind[w], wpoint[w, 0], wpoint[w, 1], wpoint[w, 2], wnormal[w, 0],
+                                              wnormal[w, 1], wnormal[w, 2], wradius[w], xs[i, 0], xs[i, 1], xs[i, 2],
+                                              mesh, w, rad[i] + skin)
             if s < rad[i] + skin:
                 if fill:
                     wall[k] = w

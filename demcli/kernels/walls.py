@@ -72,10 +72,13 @@ def wall_distance(kind, px, py, pz, ax, ay, az, radius, x, y, z):
     return radius - rho, -rx * inv, -ry * inv, -rz * inv
 
 
-@njit(inline="always")
+@njit
 def surface_distance(kind, px, py, pz, ax, ay, az, radius, x, y, z, mesh, w, reach):
     """:func:`wall_distance` for every kind: a mesh wall (w, its arrays ``mesh``) gives its nearest
-    contact within ``reach`` [m] (:func:`demcli.kernels.mesh.nearest_feature`; s = reach when none)."""
+    contact within ``reach`` [m] (:func:`demcli.kernels.mesh.nearest_feature`; s = reach when none).
+    ``mesh`` None (no mesh wall): the mesh path is not compiled (:mod:`demcli.kernels.switch`)."""
+    if mesh is None:
+        return wall_distance(kind, px, py, pz, ax, ay, az, radius, x, y, z)
     if kind == MESH:
         return nearest_feature(mesh, w, px, py, pz, x, y, z, reach)
     return wall_distance(kind, px, py, pz, ax, ay, az, radius, x, y, z)

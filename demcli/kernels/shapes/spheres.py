@@ -160,11 +160,8 @@ def _pair_forces(start, pj, xs, vs, ws, rad, smat, smass, prm, law, dt, ft, mr, 
 
 @njit(inline="always")
 def _wall_contact(i, k, w, xs, vs, ws, rad, smat, smass, wkind, wpoint, wnormal, wradius, wv, wmat,
-                  prm, law, dt, wft, wmr, friction, rolling, mesh):
-    """Force and torque on sphere i from wall w (history row k); zero when apart."""
-    if wkind[w] == MESH:
-        return _mesh_contact(i, k, w, xs, vs, ws, rad, smat, smass, wpoint, wv, wmat, prm, law, dt, wft, wmr,
-                             friction, rolling, mesh)
+                  prm, law, dt, wft, wmr, friction, rolling):
+    """Force and torque on sphere i from plane or cylinder wall w (history row k); zero when apart."""
     s, nx, ny, nz = wall_distance(wkind[w], wpoint[w, 0], wpoint[w, 1], wpoint[w, 2],
                                   wnormal[w, 0], wnormal[w, 1], wnormal[w, 2], wradius[w],
                                   xs[i, 0], xs[i, 1], xs[i, 2])
@@ -307,14 +304,22 @@ def _wall_forces(wprim, wwall, xs, vs, ws, rad, smat, smass, wkind, wpoint, wnor
                  dt, wft, wmr, friction, rolling, energy, wfc, wtq, wen, split, mesh):
     """Every sphere-wall contact k (prange over contacts: each writes its own rows); ``split``
     as in :func:`_pair_forces` (a mixed scene: the contacts of primitives below it only); ``mesh``
-    the MeshArrays of the mesh walls (read only)."""
+    the MeshArrays of the mesh walls (read only), None without (the mesh path is then not compiled:
+    :mod:`demcli.kernels.switch`)."""
     for k in prange(wprim.shape[0]):
         if split is not None:
             if wprim[k] >= split:
                 continue
-        wfx, wfy, wfz, wtx, wty, wtz, ed, ef, kn, wfn = _wall_contact(
-            wprim[k], k, wwall[k], xs, vs, ws, rad, smat, smass, wkind, wpoint, wnormal, wradius, wv, wmat, prm, law,
-            dt, wft, wmr, friction, rolling, mesh)
+        if mesh is None:
+            out = _wall_contact(wprim[k], k, wwall[k], xs, vs, ws, rad, smat, smass, wkind, wpoint, wnormal, wradius,
+                                wv, wmat, prm, law, dt, wft, wmr, friction, rolling)
+        elif wkind[wwall[k]] == MESH:
+            out = _mesh_contact(wprim[k], k, wwall[k], xs, vs, ws, rad, smat, smass, wpoint, wv, wmat, prm, law, dt,
+                                wft, wmr, friction, rolling, mesh)
+        else:
+            out = _wall_contact(wprim[k], k, wwall[k], xs, vs, ws, rad, smat, smass, wkind, wpoint, wnormal, wradius,
+                                wv, wmat, prm, law, dt, wft, wmr, friction, rolling)
+        wfx, wfy, wfz, wtx, wty, wtz, ed, ef, kn, wfn = out
         wfc[k, 0] = wfx
         wfc[k, 1] = wfy
         wfc[k, 2] = wfz
@@ -385,32 +390,42 @@ def total_strain_energy(pi, pj, xs, rad, smat, prm, law, ft, mr, friction, rolli
 def wall_strain_energy(xs, rad, smat, prm, law, wstart, wwall, wkind, wpoint, wnormal, wradius, wmat, wft, wmr,
                        friction, rolling, mesh):
     """Elastic energy in the wall contacts of the spheres 0..len(xs)-1 [J] (serial, fixed order);
-    a mesh wall's contacts each, the springs in the nearest one's (:func:`_mesh_contact`)."""
+    ``mesh``: the mesh walls' MeshArrays, None without."""
     e = 0.0
-    tri = np.empty(MAX_TOUCH, np.int64)
-    q = np.empty((MAX_TOUCH, 3))
-    nrm = np.empty((MAX_TOUCH, 3))
-    s = np.empty(MAX_TOUCH)
-    fresh = np.zeros((1, 3))
     for i in range(xs.shape[0]):
         for k in range(wstart[i], wstart[i + 1]):
             wl = wwall[k]
-            if wkind[wl] == MESH:
-                count = wall_contacts(mesh, wl, wpoint[wl, 0], wpoint[wl, 1], wpoint[wl, 2], xs[i, 0], xs[i, 1],
-                                      xs[i, 2], rad[i], tri, q, nrm, s)
-                near = 0
-                for m in range(1, count):
-                    if s[m] < s[near]:
-                        near = m
-                for m in range(count):
-                    hist, mr, row = (wft, wmr, k) if m == near else (fresh, fresh, 0)
-                    e += strain_energy(law, prm, smat[i], wmat[wl], rad[i] - s[m], rad[i], hist, mr, row, friction,
-                                       rolling)
-                continue
+            if mesh is not None:  # compiled for scenes with mesh walls only
+                if wkind[wl] == MESH:
+                    e += _mesh_strain_energy(i, k, wl, xs, rad, smat, wmat, prm, law, wpoint, wft, wmr, friction,
+                                             rolling, mesh)
+                    continue
             sd, _, _, _ = wall_distance(wkind[wl], wpoint[wl, 0], wpoint[wl, 1], wpoint[wl, 2],
                                         wnormal[wl, 0], wnormal[wl, 1], wnormal[wl, 2], wradius[wl],
                                         xs[i, 0], xs[i, 1], xs[i, 2])
             delta = rad[i] - sd
             if delta > 0.0:
                 e += strain_energy(law, prm, smat[i], wmat[wl], delta, rad[i], wft, wmr, k, friction, rolling)
+    return e
+
+
+@njit
+def _mesh_strain_energy(i, k, wl, xs, rad, smat, wmat, prm, law, wpoint, wft, wmr, friction, rolling, mesh):
+    """Elastic energy [J] of sphere i's contacts with mesh wall wl, each feature's, the springs
+    (row k) in the nearest one's (:func:`_mesh_contact`)."""
+    tri = np.empty(MAX_TOUCH, np.int64)
+    q = np.empty((MAX_TOUCH, 3))
+    nrm = np.empty((MAX_TOUCH, 3))
+    s = np.empty(MAX_TOUCH)
+    fresh = np.zeros((1, 3))
+    count = wall_contacts(mesh, wl, wpoint[wl, 0], wpoint[wl, 1], wpoint[wl, 2], xs[i, 0], xs[i, 1], xs[i, 2], rad[i],
+                          tri, q, nrm, s)
+    near = 0
+    for m in range(1, count):
+        if s[m] < s[near]:
+            near = m
+    e = 0.0
+    for m in range(count):
+        hist, mr, row = (wft, wmr, k) if m == near else (fresh, fresh, 0)
+        e += strain_energy(law, prm, smat[i], wmat[wl], rad[i] - s[m], rad[i], hist, mr, row, friction, rolling)
     return e
