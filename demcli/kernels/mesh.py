@@ -291,22 +291,31 @@ def wall_contacts(mesh, w, px, py, pz, x, y, z, r, out_tri, out_q, out_n, out_s)
 
 
 @njit
-def nearest_feature(mesh, w, px, py, pz, x, y, z, reach):
-    """(s, nx, ny, nz): distance [m] from the point (x, y, z) to mesh wall w (point (px, py, pz))
-    and the unit normal of its nearest contact, among the features within ``reach`` [m];
-    (reach, 0, 0, 0) when none is."""
+def wall_features(mesh, w, px, py, pz, x, y, z, r):
+    """(count, nearest, normals (MAX_TOUCH, 3), distances s (MAX_TOUCH,) [m]) of the contacts of the
+    sphere at (x, y, z) of radius r [m] with mesh wall w (point (px, py, pz)): :func:`wall_contacts`
+    in fresh arrays, and the row of the nearest one (0 when none)."""
     tri = np.empty(MAX_TOUCH, np.int64)
     q = np.empty((MAX_TOUCH, 3))
     nrm = np.empty((MAX_TOUCH, 3))
     s = np.empty(MAX_TOUCH)
-    count = wall_contacts(mesh, w, px, py, pz, x, y, z, reach, tri, q, nrm, s)
+    count = wall_contacts(mesh, w, px, py, pz, x, y, z, r, tri, q, nrm, s)
+    near = 0
+    for m in range(1, count):
+        if s[m] < s[near]:
+            near = m
+    return count, near, nrm, s
+
+
+@njit
+def nearest_feature(mesh, w, px, py, pz, x, y, z, reach):
+    """(s, nx, ny, nz): distance [m] from the point (x, y, z) to mesh wall w (point (px, py, pz))
+    and the unit normal of its nearest contact, among the features within ``reach`` [m];
+    (reach, 0, 0, 0) when none is."""
+    count, near, nrm, s = wall_features(mesh, w, px, py, pz, x, y, z, reach)
     if count == 0:
         return reach, 0.0, 0.0, 0.0
-    best = 0
-    for m in range(1, count):
-        if s[m] < s[best]:
-            best = m
-    return s[best], nrm[best, 0], nrm[best, 1], nrm[best, 2]
+    return s[near], nrm[near, 0], nrm[near, 1], nrm[near, 2]
 
 
 def cell_size(verts, tris):

@@ -23,7 +23,7 @@ from demcli.kernels.bonds import bond_forces
 from demcli.kernels.contact import (HERTZ, P_ARM, P_CN, P_ESTAR, P_KN, P_ZETA, contact_law, pair_kinematics,
                                    strain_energy)
 from demcli.kernels.layout import F_BONDS, F_CLUMPS, F_ENERGY, F_FRICTION, F_ROLLING
-from demcli.kernels.mesh import MAX_TOUCH, wall_contacts
+from demcli.kernels.mesh import wall_features
 from demcli.kernels.switch import choose
 from demcli.kernels.walls import MESH, surface_distance, wall_distance
 
@@ -225,16 +225,8 @@ def _mesh_contact(i, k, w, xs, vs, ws, rad, smat, smass, wpoint, wv, wmat, prm, 
     at each feature's distance s and normal n: F = sum_m F(s_m, n_m) [N]. The nearest feature
     carries the sphere's springs against the mesh (row k: kept across triangle edges); the others
     (a concave corner) start theirs afresh each step. One face contact: the plane's arithmetic."""
-    tri = np.empty(MAX_TOUCH, np.int64)
-    q = np.empty((MAX_TOUCH, 3))
-    nrm = np.empty((MAX_TOUCH, 3))
-    s = np.empty(MAX_TOUCH)
-    count = wall_contacts(mesh, w, wpoint[w, 0], wpoint[w, 1], wpoint[w, 2], xs[i, 0], xs[i, 1], xs[i, 2], rad[i],
-                          tri, q, nrm, s)
-    near = 0
-    for m in range(1, count):
-        if s[m] < s[near]:
-            near = m
+    count, near, nrm, s = wall_features(mesh, w, wpoint[w, 0], wpoint[w, 1], wpoint[w, 2], xs[i, 0], xs[i, 1],
+                                        xs[i, 2], rad[i])
     fresh_ft = np.zeros((1, 3))
     fresh_mr = np.zeros((1, 3))
     out = _surface_contact(i, w, rad[i] if count == 0 else s[near], 0.0 if count == 0 else nrm[near, 0],
@@ -413,17 +405,9 @@ def wall_strain_energy(xs, rad, smat, prm, law, wstart, wwall, wkind, wpoint, wn
 def _mesh_strain_energy(i, k, wl, xs, rad, smat, wmat, prm, law, wpoint, wft, wmr, friction, rolling, mesh):
     """Elastic energy [J] of sphere i's contacts with mesh wall wl, each feature's, the springs
     (row k) in the nearest one's (:func:`_mesh_contact`)."""
-    tri = np.empty(MAX_TOUCH, np.int64)
-    q = np.empty((MAX_TOUCH, 3))
-    nrm = np.empty((MAX_TOUCH, 3))
-    s = np.empty(MAX_TOUCH)
+    count, near, _, s = wall_features(mesh, wl, wpoint[wl, 0], wpoint[wl, 1], wpoint[wl, 2], xs[i, 0], xs[i, 1],
+                                      xs[i, 2], rad[i])
     fresh = np.zeros((1, 3))
-    count = wall_contacts(mesh, wl, wpoint[wl, 0], wpoint[wl, 1], wpoint[wl, 2], xs[i, 0], xs[i, 1], xs[i, 2], rad[i],
-                          tri, q, nrm, s)
-    near = 0
-    for m in range(1, count):
-        if s[m] < s[near]:
-            near = m
     e = 0.0
     for m in range(count):
         hist, mr, row = (wft, wmr, k) if m == near else (fresh, fresh, 0)
