@@ -65,7 +65,7 @@ def describe_case(path, overrides=()):
         plan = dem.plan_summary(case, cfg, {"clumps": bool(scene and scene[3]) or clumped, "polyhedra": poly})
         lines += ["  " + line for line in plan.describe().splitlines()]
         if cfg.walls:
-            lines.append(f"  walls: {len(dem.build_walls(cfg, case))}")
+            lines.append(f"  walls: {len(dem.build_walls(cfg, case, path, f'stages[{k}].walls'))}")
         if scene is None:
             lines.append("  time step: decided at run time from the bodies of the input state "
                          f"({cfg.time.dt_factor:g} x critical)" if cfg.time.dt is None else

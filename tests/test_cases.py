@@ -78,3 +78,28 @@ def test_check_compiles_no_kernel():
                          text=True, check=True)
     # Then no kernel has a compiled signature
     assert out.stdout.strip() == "0"
+
+
+def test_mesh_heads_press_the_bed(tmp_path):
+    # Given the mesh-wall smoke case: spheres settled in the lower Marshall head (a mesh), the upper
+    # head (the same mesh turned over) coming down at 0.1 m/s for 0.08 s
+    from demcli.compare import read_record
+
+    run_case(CASES / "smoke" / "mesh_head.yaml", out=tmp_path, quiet=True, threads=1)
+    rec, _ = read_record(tmp_path / "records" / "press_walls.csv")
+    st = read_state(tmp_path / "02-press.h5")
+    # Then the upper head moved v t (its position along its normal -z grows), met the bed and
+    # carries a load that the lower head and the end plates take up, the bed's weight besides
+    assert rec["upper.position"][-1] - rec["upper.position"][0] == pytest.approx(0.1 * rec["time"][-1], rel=1e-9)
+    assert rec["upper.force"][0] == 0.0 and rec["upper.force"][-1] > 10.0
+    weight = float(st["bodies/mass"].sum()) * 9.81
+    assert rec["lower.force"][1] == pytest.approx(weight, rel=0.5)
+    held = rec["lower.force"][-1] + rec["front.force"][-1] + rec["back.force"][-1]
+    assert held > rec["upper.force"][-1]
+    # and the spheres stay in the cradle: above the arc of radius 50.8 mm (up to the overlap guard)
+    c, r = st.sphere_centres(), st["spheres/radius"]
+    assert np.all(np.hypot(c[:, 0], c[:, 2]) + r < 50.8e-3 * 1.01) and np.all(np.abs(c[:, 1]) < 38.1e-3)
+    # and the snapshots draw both heads: 2 x 128 triangles
+    import meshio
+
+    assert len(meshio.read(sorted((tmp_path / "press").glob("walls_*.vtu"))[-1]).cells_dict["triangle"]) == 256

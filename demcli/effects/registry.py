@@ -50,6 +50,8 @@ class EffectSpec:
         passes: kernel passes it adds.
         counters: names of kernel pass counters that prove it ran.
         unsupported: {shape: why not} for each shape of :data:`SHAPES` it does not run on.
+        limits: {shape: what it does not do there} for shapes it runs on in part (the stage's
+            checks refuse the rest, with this text).
         excludes: ((other effect, why not), ...) effects it cannot run with.
     """
 
@@ -64,6 +66,7 @@ class EffectSpec:
     passes: tuple = ()
     counters: tuple = ()
     unsupported: dict = field(default_factory=dict)
+    limits: dict = field(default_factory=dict)
     excludes: tuple = ()
 
     def supports(self, shape):
@@ -147,7 +150,8 @@ def effects_table():
         if s.source == "shape":
             continue
         arrays = ", ".join(f"`{n}[{per}]`" for n, per in s.fields) or "-"
-        cells = ["yes" if s.supports(shape) else f"no: {s.unsupported[shape]}" for shape in SHAPES]
+        cells = [(f"yes, {s.limits[shape]}" if shape in s.limits else "yes") if s.supports(shape)
+                 else f"no: {s.unsupported[shape]}" for shape in SHAPES]
         rows.append(f"| {s.name} | `{s.where}` | {f'`{s.flag}`' if s.flag else '-'} | {arrays} | "
                     + " | ".join(cells) + " |")
     return "\n".join(rows) + "\n"
@@ -158,6 +162,8 @@ _ROLLING_POLY = "a rolling-resistance moment corrects spheres for the shape they
 _PLANAR_POLY = "a 2D scene is made of disks (the polygons stage's sections are discretized into bonded disks); " \
                "a polyhedron's contact is a 3D overlap volume"
 _DASHPOT_SPHERES = "the sphere laws carry their restitution dashpot always (set restitution 1 for none)"
+_WALLS_POLY = "plane and box walls only: a polyhedron's wall contact is its overlap with a half-space; cylinder " \
+              "and mesh walls are for spheres and clumps"
 
 # in the order of the physics section's keys (docs/cases.md lists them so)
 register(EffectSpec(
@@ -202,8 +208,8 @@ register(EffectSpec(
     fields=(("pair_losses", "pair"), ("sphere_losses", "sphere"), ("body_losses", "body")),
     passes=("pairs:losses", "gather:losses"), counters=("energy",)))
 register(EffectSpec(
-    "walls", "rigid plane and cylinder walls with velocity, force or servo control",
-    source="walls", declared_by="walls",
+    "walls", "rigid plane, cylinder and triangle-mesh walls with velocity, force or servo control",
+    source="walls", declared_by="walls", limits={"polyhedra": _WALLS_POLY, "mixed": _WALLS_POLY},
     fields=(("wall_list", "wall_pair"), ("wall_force", "wall")),
     passes=("walls:move", "walls:list", "walls:control"), counters=("wallmove", "wallctrl")))
 register(EffectSpec(

@@ -182,7 +182,7 @@ class MixedShape:
         e = strain_energy_mixed(MixedShape.geometry(s), nl, s.prm, s.law, friction, rolling)
         return float(e + wall_strain_energy(s.xs[:s.ns], s.rad, s.smat, s.prm, s.law, nl.wstart, nl.wwall, w.kind,
                                             s.wpoint, w.normal, w.radius, s.wmat, nl.wft, nl.wmr, friction,
-                                            rolling))
+                                            rolling, s.wmesh))
 
     contact_count = staticmethod(SphereShape.contact_count)  # (pairs touching, wall contacts touching)
 

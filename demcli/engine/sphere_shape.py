@@ -183,7 +183,7 @@ class SphereShape:
                                       s.prm, s.law, friction, rolling)) if len(bd) else 0.0
         return eb + float(total_strain_energy(nl.pi, nl.pj, s.xs, s.rad, s.smat, s.prm, s.law, nl.ft, nl.mr,
                                               friction, rolling, nl.wstart, nl.wwall, w.kind, s.wpoint, w.normal,
-                                              w.radius, s.wmat, nl.wft, nl.wmr))
+                                              w.radius, s.wmat, nl.wft, nl.wmr, s.wmesh))
 
     @staticmethod
     def contact_count(s):
@@ -199,8 +199,8 @@ class SphereShape:
         nl = s.nl
         w = s.walls
         ba = s._bond_arrays
-        return contact_virial(nl.pi, nl.pj, nl.act, nl.fc, s.xs, nl.wstart, nl.wwall, nl.wfc, w.kind, s.wpoint,
-                              w.normal, w.radius, ba[0], ba[1], ba[7]) / volume
+        return contact_virial(nl.pi, nl.pj, nl.act, nl.fc, s.xs, s.rad, nl.wstart, nl.wwall, nl.wfc, w.kind, s.wpoint,
+                              w.normal, w.radius, s.wmesh, ba[0], ba[1], ba[7]) / volume
 
     @staticmethod
     def contacts_per_sphere(s):

@@ -18,6 +18,7 @@ from demcli.engine.materials import wall_materials
 from demcli.kernels import layout as K
 from demcli.kernels import motion as M
 from demcli.kernels.switch import static_mask
+from demcli.kernels.mesh import mesh_arrays
 from demcli.kernels.walls import N_WPARAMS
 
 # adaptive damping: initial alpha (seed 002: 0.1 1/s)
@@ -39,6 +40,7 @@ class Walls:
     prm: np.ndarray = field(default_factory=lambda: np.zeros((0, N_WPARAMS)))
     extent: np.ndarray = field(default_factory=lambda: np.zeros((0, 6)))
     rigid: np.ndarray = None  # (n_w,) bool: E* and G* from the particle alone; None: none rigid
+    mesh: list = None  # per wall (vertices relative to its point [m], triangles) or None; None: no mesh wall
 
     def __len__(self):
         return len(self.kind)
@@ -240,6 +242,7 @@ class System:
         self.wpoint = np.ascontiguousarray(walls.point, np.float64).copy()
         self.wpoint0 = self.wpoint.copy()
         self.wv = np.ascontiguousarray(walls.v, np.float64).copy()
+        self.wmesh = mesh_arrays(walls.mesh)  # None without mesh walls (the mesh path is not compiled)
 
     def angmom_from_omega(self):
         """L = R diag(I) R^T omega for each body (world frame), or the stored angular momentum."""
@@ -293,7 +296,7 @@ class System:
         """The WallArrays tuple (updated in place)."""
         w = self.walls
         return K.WallArrays(w.kind, self.wpoint, w.normal, w.radius, self.wv, self.wmat, w.control, w.prm,
-                            self.wforce, self.wkn)
+                            self.wforce, self.wkn, self.wmesh)
 
     def advance(self, nsteps):
         """Run ``nsteps`` steps in compiled code; returns (status, steps done)."""

@@ -46,9 +46,9 @@ def _read_cells(path, case_file, key):
         _fail(case_file, key, "file not found", str(path))
     try:
         with np.errstate(over="ignore"):      # meshio's binary-STL size test overflows on ascii files
-            mesh = meshio.read(str(path), file_format=fmt)
+            mesh = getattr(meshio, fmt).read(str(path))  # the format's reader: meshio.read exits on a bad file
     except Exception as exc:  # noqa: BLE001 - any parse failure is bad input
-        _fail(case_file, key, f"cannot read as {fmt.upper()}: {exc}", str(path))
+        _fail(case_file, key, f"cannot read as {fmt.upper()}" + (f": {exc}" if str(exc) else ""), str(path))
     others = sorted({block.type for block in mesh.cells if block.type not in ("triangle", "vertex", "line")})
     if others:
         _fail(case_file, key, "must hold triangles only", f"{path.name}: {', '.join(others)} cells")

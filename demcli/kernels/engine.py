@@ -87,7 +87,7 @@ def rebuild_lists(g, bd, nl, par, flags, wa, bonds, bprm, vol, pair_torque):
     wstart, wprim, wwall, wft, wmr, wfc, wtq, wen, wgeo = (nl.wstart, nl.wprim, nl.wwall, nl.wft, nl.wmr, nl.wfc,
                                                            nl.wtq, nl.wen, nl.wgeo)
     if wa.v.shape[0] > 0:
-        nws, nwp, nww = build_wall_pairs(xs, rad, skin, wa.kind, wa.point, wa.normal, wa.radius)
+        nws, nwp, nww = build_wall_pairs(xs, rad, skin, wa.kind, wa.point, wa.normal, wa.radius, wa.mesh)
         nq = nww.shape[0]
         nwft = np.zeros((nq if friction else 0, 3))
         nwmr = np.zeros((nq if rolling else 0, 3))

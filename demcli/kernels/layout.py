@@ -42,9 +42,18 @@ Params = namedtuple("Params", "dt law gravity local visc skin max_cells nsmall c
 (Cundall lambda); visc (alpha [1/s]); skin [m]; max_cells; nsmall (primitives 0..nsmall-1 go
 through the cell grid, the rest are actors); check_every; overlap_limit; ke_limit [J]."""
 
-WallArrays = namedtuple("WallArrays", "kind point normal radius v material control prm force kn")
+MeshArrays = namedtuple("MeshArrays", "verts tris vstart tstart lo dims cell cstart cbase clist lbase")
+"""Triangle meshes of the mesh walls (kind walls.MESH), all walls' concatenated: wall w's vertices
+verts[vstart[w]:vstart[w + 1]] (m, relative to the wall's point: the mesh translates with it), its
+triangles tris[tstart[w]:tstart[w + 1]] (int64, indices into its own vertices), its cell grid
+(:func:`demcli.kernels.mesh.bin_triangles`): origin lo[w] (3,), dims[w] (3,) int64, cell edge cell[w],
+cell starts cstart[cbase[w]:cbase[w + 1]] into its list clist[lbase[w]:lbase[w + 1]]. None in
+WallArrays when the scene has no mesh wall (:func:`demcli.kernels.mesh.mesh_arrays`): nothing
+allocated, and the kernels are compiled without the mesh path (demcli.kernels.switch)."""
+
+WallArrays = namedtuple("WallArrays", "kind point normal radius v material control prm force kn mesh")
 """Walls: kind (int8), point, normal, radius, v, material, control (int8), prm (W_* columns),
-force (sum of contact forces on each wall), kn (servo stiffness)."""
+force (sum of contact forces on each wall), kn (servo stiffness), mesh (MeshArrays, or None)."""
 
 Contacts = namedtuple("Contacts", "start pi pj rstart rlist ft mr fc tj act epair geo sep sdir sclear pbox "
                                   "wstart wprim wwall wft wmr wfc wtq wen wgeo xref wref")

@@ -3,15 +3,16 @@
 import numpy as np
 
 from demcli.jit import njit
-from demcli.kernels.walls import wall_distance
+from demcli.kernels.walls import surface_distance
 
 
 @njit
-def contact_virial(pi, pj, act, fc, xs, wstart, wwall, wfc, wkind, wpoint, wnormal, wradius, bstart, bj, bfc):
+def contact_virial(pi, pj, act, fc, xs, rad, wstart, wwall, wfc, wkind, wpoint, wnormal, wradius, mesh, bstart, bj,
+                   bfc):
     """Sum over every contact and bond of branch (x) force [N m], a (3, 3) tensor.
 
     Pairs and bonds add (x_i - x_j) (x) f_i, wall contacts (x_i - x_c) (x) f_i with x_c the
-    contact point on the wall. Divided by the volume it is the mean stress in the
+    contact point on the wall (a mesh wall: its nearest contact's). Divided by the volume it is the mean stress in the
     particles (Love-Weber; compression positive): sigma = (1/V) sum l (x) f.
     """
     s = np.zeros((3, 3))
@@ -31,8 +32,9 @@ def contact_virial(pi, pj, act, fc, xs, wstart, wwall, wfc, wkind, wpoint, wnorm
     for i in range(wstart.shape[0] - 1):
         for k in range(wstart[i], wstart[i + 1]):
             w = wwall[k]
-            d, nx, ny, nz = wall_distance(wkind[w], wpoint[w, 0], wpoint[w, 1], wpoint[w, 2], wnormal[w, 0],
-                                          wnormal[w, 1], wnormal[w, 2], wradius[w], xs[i, 0], xs[i, 1], xs[i, 2])
+            d, nx, ny, nz = surface_distance(wkind[w], wpoint[w, 0], wpoint[w, 1], wpoint[w, 2], wnormal[w, 0],
+                                             wnormal[w, 1], wnormal[w, 2], wradius[w], xs[i, 0], xs[i, 1], xs[i, 2],
+                                             mesh, w, rad[i])
             n = (nx, ny, nz)
             for a in range(3):
                 for b in range(3):

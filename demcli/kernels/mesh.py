@@ -14,6 +14,12 @@ since the feature is part of each); contacts at one point (within 1e-9 r: round-
 edge) count once. On a flat mesh exactly one contact survives, at the foot of the perpendicular; a
 convex edge gives one contact along the edge's outward normal; a concave corner gives one
 face contact per face. Vertices must be shared by index (the mesh reader merges them).
+
+A face contact takes the face's unit normal n_f = (b - a) x (c - a) / |(b - a) x (c - a)|, turned
+to the sphere's side, and the distance s = (c - a) . n [m] (the plane wall's arithmetic: a flat
+mesh parallel to a coordinate plane gives the plane's s and n bit for bit); edge and vertex
+contacts n = (c - q) / |c - q|. Each triangle is visited once per query, in the first cell its
+bounding box shares with the sphere's (no marks: queries run in parallel without shared writes).
 """
 
 import math
@@ -128,10 +134,10 @@ def _cell_span(verts, tri, lo, dims, cell, d):
 
 
 @njit
-def _touching(centre, r, verts, tris, lo, dims, cstart, clist, cell, mark, tag, tri, dist, q, region):
-    """Triangles within r of ``centre`` from the cells the sphere's box overlaps, each once (a
-    triangle t is visited when mark[t] != tag, then marked). Fills tri, dist, q (rows), region;
-    returns the count."""
+def _touching(centre, r, verts, tris, lo, dims, cstart, clist, cell, tri, dist, q, region, nrm):
+    """Triangles within r of ``centre`` from the cells the sphere's box overlaps, each once (in the
+    first cell shared by its box and the sphere's). Fills tri, dist (s [m]), q (rows: closest
+    point), region, nrm (rows: unit normal from the mesh to the centre); returns the count."""
     n = 0
     ilo = np.empty(3, np.int64)
     ihi = np.empty(3, np.int64)
@@ -144,17 +150,46 @@ def _touching(centre, r, verts, tris, lo, dims, cstart, clist, cell, mark, tag, 
                 k = (ix * dims[1] + iy) * dims[2] + iz
                 for m in range(cstart[k], cstart[k + 1]):
                     t = clist[m]
-                    if mark[t] == tag or n == MAX_TOUCH:
+                    if n == MAX_TOUCH or not _first_cell(verts, tris[t], lo, dims, cell, ilo, ix, iy, iz):
                         continue
-                    mark[t] = tag
-                    qx, qy, qz, reg = closest_on_triangle(centre, verts[tris[t, 0]], verts[tris[t, 1]],
-                                                          verts[tris[t, 2]])
-                    s = math.sqrt((centre[0] - qx) ** 2 + (centre[1] - qy) ** 2 + (centre[2] - qz) ** 2)
-                    if s < r:
-                        tri[n], dist[n], region[n] = t, s, reg
-                        q[n, 0], q[n, 1], q[n, 2] = qx, qy, qz
+                    if _triangle_contact(centre, r, verts, tris[t], n, dist, q, region, nrm):
+                        tri[n] = t
                         n += 1
     return n
+
+
+@njit(inline="always")
+def _first_cell(verts, tri, lo, dims, cell, ilo, ix, iy, iz):
+    """Whether cell (ix, iy, iz) is the first one the triangle's box shares with the query's (from ilo)."""
+    return (ix == max(_cell_span(verts, tri, lo, dims, cell, 0)[0], ilo[0])
+            and iy == max(_cell_span(verts, tri, lo, dims, cell, 1)[0], ilo[1])
+            and iz == max(_cell_span(verts, tri, lo, dims, cell, 2)[0], ilo[2]))
+
+
+@njit
+def _triangle_contact(centre, r, verts, tri, n, dist, q, region, nrm):
+    """Row n of dist, q, region, nrm for one triangle (module notes); whether it lies within r."""
+    a, b, c = verts[tri[0]], verts[tri[1]], verts[tri[2]]
+    qx, qy, qz, reg = closest_on_triangle(centre, a, b, c)
+    if reg == FACE:
+        abx, aby, abz = b[0] - a[0], b[1] - a[1], b[2] - a[2]
+        acx, acy, acz = c[0] - a[0], c[1] - a[1], c[2] - a[2]
+        fx, fy, fz = aby * acz - abz * acy, abz * acx - abx * acz, abx * acy - aby * acx
+        ln = math.sqrt(fx * fx + fy * fy + fz * fz)
+        nx, ny, nz = fx / ln, fy / ln, fz / ln
+        s = (centre[0] - a[0]) * nx + (centre[1] - a[1]) * ny + (centre[2] - a[2]) * nz
+        if s < 0.0:
+            nx, ny, nz, s = -nx, -ny, -nz, -s
+    else:
+        s = math.sqrt((centre[0] - qx) ** 2 + (centre[1] - qy) ** 2 + (centre[2] - qz) ** 2)
+        d = s if s > 0.0 else 1.0  # divided, not times 1/s: a vertex straight below gives n = (0, 0, 1) exactly
+        nx, ny, nz = (centre[0] - qx) / d, (centre[1] - qy) / d, (centre[2] - qz) / d
+    if not s < r:
+        return False
+    dist[n], region[n] = s, reg
+    q[n, 0], q[n, 1], q[n, 2] = qx, qy, qz
+    nrm[n, 0], nrm[n, 1], nrm[n, 2] = nx, ny, nz
+    return True
 
 
 @njit(inline="always")
@@ -211,31 +246,113 @@ def _first_at_feature(m, n, tris, tri, dist, q, region, tol):
 
 
 @njit
-def sphere_mesh_contacts(centre, r, verts, tris, lo, dims, cstart, clist, cell, mark, tag, out_tri, out_q, out_n,
-                         out_delta):
-    """Contacts of one sphere (centre (3,) [m], radius r [m]) with one mesh wall, one per touched
-    feature (see the module notes). Grid from :func:`bin_triangles`; ``mark`` (nt,) int64 and
-    ``tag`` a value no entry of mark holds (a query number: mark[t] = tag for the visited
-    triangles). Writes row k < count of out_tri (triangle), out_q (contact point on the mesh [m]),
-    out_n (unit normal, mesh to sphere), out_delta (overlap r - |c - q| [m]); returns count.
-    Out arrays have MAX_TOUCH rows."""
-    dist = np.empty(MAX_TOUCH)
+def sphere_mesh_contacts(centre, r, verts, tris, lo, dims, cstart, clist, cell, out_tri, out_q, out_n, out_s):
+    """Contacts of one sphere (centre (3,) [m], radius r [m]) with one mesh, one per touched
+    feature (see the module notes). Grid from :func:`bin_triangles`. Writes row k < count of
+    out_tri (triangle), out_q (closest point on the mesh [m]), out_n (unit normal, mesh to
+    sphere), out_s (distance s from the centre [m]; overlap r - s); returns count. Out arrays have
+    MAX_TOUCH rows. Reads only: safe in a parallel loop."""
     region = np.empty(MAX_TOUCH, np.int64)
-    n = _touching(centre, r, verts, tris, lo, dims, cstart, clist, cell, mark, tag, out_tri, dist, out_q, region)
+    n = _touching(centre, r, verts, tris, lo, dims, cstart, clist, cell, out_tri, out_s, out_q, region, out_n)
     keep = np.empty(n, np.bool_)
     for m in range(n):
-        keep[m] = _first_at_feature(m, n, tris, out_tri, dist, out_q, region, SAME_POINT * r)
+        keep[m] = _first_at_feature(m, n, tris, out_tri, out_s, out_q, region, SAME_POINT * r)
     count = 0
     for m in range(n):
-        s = dist[m]
-        if not keep[m]:
-            continue
-        if s <= 0.0:        # centre on the surface: no direction to push along
+        if not keep[m] or out_s[m] <= 0.0:        # centre on the surface: no direction to push along
             continue
         out_tri[count] = out_tri[m]
-        out_delta[count] = r - s
+        out_s[count] = out_s[m]
         for d in range(3):
-            out_n[count, d] = (centre[d] - out_q[m, d]) / s
+            out_n[count, d] = out_n[m, d]
             out_q[count, d] = out_q[m, d]
         count += 1
     return count
+
+
+@njit(inline="always")
+def mesh_of(mesh, w):
+    """(verts, tris, lo, dims, cstart, clist, cell) of mesh wall w in the MeshArrays ``mesh``
+    (:data:`demcli.kernels.layout.MeshArrays`): views, the vertices relative to the wall's point."""
+    cs = mesh.cstart[mesh.cbase[w]:mesh.cbase[w + 1]]
+    cl = mesh.clist[mesh.lbase[w]:mesh.lbase[w + 1]]
+    return (mesh.verts[mesh.vstart[w]:mesh.vstart[w + 1]], mesh.tris[mesh.tstart[w]:mesh.tstart[w + 1]], mesh.lo[w],
+            mesh.dims[w], cs, cl, mesh.cell[w])
+
+
+@njit
+def wall_contacts(mesh, w, px, py, pz, x, y, z, r, out_tri, out_q, out_n, out_s):
+    """:func:`sphere_mesh_contacts` of the sphere at (x, y, z) [m] of radius r with mesh wall w
+    whose point is (px, py, pz) now (the mesh translated with it); out_q relative to that point."""
+    c = np.empty(3)
+    c[0], c[1], c[2] = x - px, y - py, z - pz
+    verts, tris, lo, dims, cstart, clist, cell = mesh_of(mesh, w)
+    return sphere_mesh_contacts(c, r, verts, tris, lo, dims, cstart, clist, cell, out_tri, out_q, out_n, out_s)
+
+
+@njit
+def wall_features(mesh, w, px, py, pz, x, y, z, r):
+    """(count, nearest, normals (MAX_TOUCH, 3), distances s (MAX_TOUCH,) [m]) of the contacts of the
+    sphere at (x, y, z) of radius r [m] with mesh wall w (point (px, py, pz)): :func:`wall_contacts`
+    in fresh arrays, and the row of the nearest one (0 when none)."""
+    tri = np.empty(MAX_TOUCH, np.int64)
+    q = np.empty((MAX_TOUCH, 3))
+    nrm = np.empty((MAX_TOUCH, 3))
+    s = np.empty(MAX_TOUCH)
+    count = wall_contacts(mesh, w, px, py, pz, x, y, z, r, tri, q, nrm, s)
+    near = 0
+    for m in range(1, count):
+        if s[m] < s[near]:
+            near = m
+    return count, near, nrm, s
+
+
+@njit
+def nearest_feature(mesh, w, px, py, pz, x, y, z, reach):
+    """(s, nx, ny, nz): distance [m] from the point (x, y, z) to mesh wall w (point (px, py, pz))
+    and the unit normal of its nearest contact, among the features within ``reach`` [m];
+    (reach, 0, 0, 0) when none is."""
+    count, near, nrm, s = wall_features(mesh, w, px, py, pz, x, y, z, reach)
+    if count == 0:
+        return reach, 0.0, 0.0, 0.0
+    return s[near], nrm[near, 0], nrm[near, 1], nrm[near, 2]
+
+
+def cell_size(verts, tris):
+    """Cell edge of a mesh's grid [m]: the mean over its triangles of their bounding boxes' largest side."""
+    corners = verts[tris]
+    return float(np.mean(np.ptp(corners, axis=1).max(axis=1)))
+
+
+def mesh_arrays(meshes):
+    """MeshArrays (:data:`demcli.kernels.layout.MeshArrays`) of the walls: ``meshes`` per wall
+    (vertices relative to the wall's point [m], triangles) or None (not a mesh wall); None when no
+    wall is a mesh (meshes None or all None): nothing allocated, and the kernels compile without
+    the mesh path (:mod:`demcli.kernels.switch`)."""
+    from demcli.kernels.layout import MeshArrays
+
+    i64 = np.int64
+    if meshes is None or all(m is None for m in meshes):
+        return None
+    nw = len(meshes)
+    parts = {"verts": [], "tris": [], "cstart": [], "clist": []}
+    lo, dims, cell = np.zeros((nw, 3)), np.ones((nw, 3), i64), np.ones(nw)
+    for w, m in enumerate(meshes):
+        if m is None:
+            continue
+        verts, tris = np.ascontiguousarray(m[0], float), np.ascontiguousarray(m[1], i64)
+        cell[w] = cell_size(verts, tris)
+        lo[w], dims[w], cstart, clist = bin_triangles(verts, tris, cell[w])
+        for key, a in zip(parts, (verts, tris, cstart, clist)):
+            parts[key].append(a)
+
+    def offsets(key):
+        sizes = np.zeros(nw + 1, i64)
+        it = iter(parts[key])
+        for w, m in enumerate(meshes):
+            sizes[w + 1] = 0 if m is None else len(next(it))
+        return np.cumsum(sizes)
+
+    return MeshArrays(np.concatenate(parts["verts"]), np.concatenate(parts["tris"]), offsets("verts"),
+                      offsets("tris"), lo, dims, cell, np.concatenate(parts["cstart"]), offsets("cstart"),
+                      np.concatenate(parts["clist"]), offsets("clist"))

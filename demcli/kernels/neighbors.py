@@ -17,7 +17,7 @@ import numpy as np
 from numba import prange
 
 from demcli.jit import njit
-from demcli.kernels.walls import wall_distance
+from demcli.kernels.walls import surface_distance, wall_distance
 
 
 @njit
@@ -205,15 +205,19 @@ def carry_history(n, start_new, key_new, start_old, key_old, hist_old, hist_new)
 
 
 @njit(parallel=True, internal=True)
-def _scan_walls(xs, rad, skin, wkind, wpoint, wnormal, wradius, start, wall, fill):
+def _scan_walls(xs, rad, skin, wkind, wpoint, wnormal, wradius, mesh, start, wall, fill):
     n = xs.shape[0]
     nw = wkind.shape[0]
     for i in prange(n):
         k = start[i] if fill else 0
         for w in range(nw):
-            s, _, _, _ = wall_distance(wkind[w], wpoint[w, 0], wpoint[w, 1], wpoint[w, 2],
-                                       wnormal[w, 0], wnormal[w, 1], wnormal[w, 2], wradius[w],
-                                       xs[i, 0], xs[i, 1], xs[i, 2])
+            if mesh is None:  # no mesh wall: the mesh path is not compiled (kernels/switch.py)
+                s, _, _, _ = wall_distance(wkind[w], wpoint[w, 0], wpoint[w, 1], wpoint[w, 2], wnormal[w, 0],
+                                           wnormal[w, 1], wnormal[w, 2], wradius[w], xs[i, 0], xs[i, 1], xs[i, 2])
+            else:
+                s, _, _, _ = surface_distance(wkind[w], wpoint[w, 0], wpoint[w, 1], wpoint[w, 2], wnormal[w, 0],
+                                              wnormal[w, 1], wnormal[w, 2], wradius[w], xs[i, 0], xs[i, 1], xs[i, 2],
+                                              mesh, w, rad[i] + skin)
             if s < rad[i] + skin:
                 if fill:
                     wall[k] = w
@@ -223,17 +227,18 @@ def _scan_walls(xs, rad, skin, wkind, wpoint, wnormal, wradius, start, wall, fil
 
 
 @njit(internal=True)
-def build_wall_pairs(xs, rad, skin, wkind, wpoint, wnormal, wradius):
-    """Sphere-wall list: (wstart (n+1,), wsphere (Q,), wwall (Q,)), sorted by sphere then wall."""
+def build_wall_pairs(xs, rad, skin, wkind, wpoint, wnormal, wradius, mesh):
+    """Sphere-wall list: (wstart (n+1,), wsphere (Q,), wwall (Q,)), sorted by sphere then wall;
+    ``mesh``: the MeshArrays of the mesh walls (a sphere within skin of any of its triangles is listed)."""
     n = xs.shape[0]
     start = np.zeros(n + 1, np.int64)
     dummy = np.empty(0, np.int64)
     # np.bool_: a typed flag, not a literal, so that both passes share one compiled scan
-    _scan_walls(xs, rad, skin, wkind, wpoint, wnormal, wradius, start, dummy, np.bool_(False))
+    _scan_walls(xs, rad, skin, wkind, wpoint, wnormal, wradius, mesh, start, dummy, np.bool_(False))
     for i in range(n):
         start[i + 1] += start[i]
     wall = np.empty(start[n], np.int64)
-    _scan_walls(xs, rad, skin, wkind, wpoint, wnormal, wradius, start, wall, np.bool_(True))
+    _scan_walls(xs, rad, skin, wkind, wpoint, wnormal, wradius, mesh, start, wall, np.bool_(True))
     sph = np.empty(start[n], np.int64)
     for i in range(n):
         for c in range(start[i], start[i + 1]):

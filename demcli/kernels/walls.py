@@ -1,18 +1,22 @@
 """Rigid wall geometry: signed distance from a sphere centre to a wall surface.
 
 Kinds: ``PLANE`` (infinite plane through ``point`` with unit ``normal`` pointing into
-the domain) and ``CYLINDER`` (inside of a cylinder of ``radius`` around the axis through
-``point`` with unit direction ``normal``). Walls translate with velocity ``v``; they do
-not rotate. A wall's normal motion is controlled by ``control[w]`` and the
-parameter row ``wprm[w, :]`` (columns ``W_*`` below).
+the domain), ``CYLINDER`` (inside of a cylinder of ``radius`` around the axis through
+``point`` with unit direction ``normal``) and ``MESH`` (a triangle mesh, vertices relative to
+``point``, both sides; ``normal`` only sets the direction of servo and force motion; contacts
+in :mod:`demcli.kernels.mesh`). Walls translate with velocity ``v``; they do not rotate. A
+wall's normal motion is controlled by ``control[w]`` and the parameter row ``wprm[w, :]``
+(columns ``W_*`` below).
 """
 
 import math
 
 from demcli.jit import njit
+from demcli.kernels.mesh import nearest_feature
 
 PLANE = 0
 CYLINDER = 1
+MESH = 2
 
 # wall control modes
 FIXED = 0
@@ -66,3 +70,15 @@ def wall_distance(kind, px, py, pz, ax, ay, az, radius, x, y, z):
         return radius, 1.0, 0.0, 0.0
     inv = 1.0 / rho
     return radius - rho, -rx * inv, -ry * inv, -rz * inv
+
+
+@njit
+def surface_distance(kind, px, py, pz, ax, ay, az, radius, x, y, z, mesh, w, reach):
+    """:func:`wall_distance` for every kind: a mesh wall (w, its arrays ``mesh``) gives its nearest
+    contact within ``reach`` [m] (:func:`demcli.kernels.mesh.nearest_feature`; s = reach when none).
+    ``mesh`` None (no mesh wall): the mesh path is not compiled (:mod:`demcli.kernels.switch`)."""
+    if mesh is None:
+        return wall_distance(kind, px, py, pz, ax, ay, az, radius, x, y, z)
+    if kind == MESH:
+        return nearest_feature(mesh, w, px, py, pz, x, y, z, reach)
+    return wall_distance(kind, px, py, pz, ax, ay, az, radius, x, y, z)

@@ -138,10 +138,15 @@ def case_schema():
 
 def load_case(path, overrides=()):
     """Validated case (a read-only Node, SI values) or ConfigError listing every problem: a case
-    file of the built-in stage types (:func:`demcli.config.case.load_case`)."""
+    file of the built-in stage types (:func:`demcli.config.case.load_case`); its mesh walls' files
+    are read (a bad one: a ConfigError naming it, :func:`demcli.stages.dem.check_mesh_files`)."""
     from demcli.config.case import load_case as load_with
+    from demcli.stages.dem import check_mesh_files
 
-    return load_with(path, stage_catalog(), overrides)
+    case = load_with(path, stage_catalog(), overrides)
+    for k, cfg in enumerate(case.stages):  # the files a config names, before any stage runs
+        check_mesh_files(cfg, path, f"stages[{k}].walls")
+    return case
 
 
 def write_cases_doc(path="docs/cases.md"):

@@ -119,7 +119,7 @@ def contact_rows(system, bodies=()):
         keep = None if not len(bodies) else np.isin(system.body_id, np.asarray(bodies, np.int64))
         return _polyhedra_rows(system, keep)
     from demcli.kernels.contact import P_ARM
-    from demcli.kernels.walls import wall_distance
+    from demcli.kernels.walls import surface_distance
 
     nl, xs, rad, ids = system.nl, system.xs, system.rad, system.body_id[system.sbody]
     keep = None if not len(bodies) else np.isin(ids, np.asarray(bodies, np.int64))
@@ -140,8 +140,9 @@ def contact_rows(system, bodies=()):
         if keep is not None and not keep[i]:
             continue
         p, a = system.wpoint[wall], w.normal[wall]
-        s, nx, ny, nz = wall_distance(int(w.kind[wall]), p[0], p[1], p[2], a[0], a[1], a[2], float(w.radius[wall]),
-                                      xs[i, 0], xs[i, 1], xs[i, 2])
+        s, nx, ny, nz = surface_distance(int(w.kind[wall]), p[0], p[1], p[2], a[0], a[1], a[2],
+                                         float(w.radius[wall]), xs[i, 0], xs[i, 1], xs[i, 2], system.wmesh, wall,
+                                         float(rad[i]))  # a mesh wall: its nearest contact
         n = np.array([nx, ny, nz])
         delta = rad[i] - s
         arm = s + (1.0 - system.prm[system.smat[i], system.wmat[wall], P_ARM]) * delta

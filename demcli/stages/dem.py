@@ -11,7 +11,7 @@ import math
 import numpy as np
 
 from demcli.config.schema import Bool, Float, Int, List, Map, Optional, Section, Str, Tagged, Vector
-from demcli.effects import declared, physics_section, shape_refusals
+from demcli.effects import EFFECTS, declared, physics_section, shape_refusals
 from demcli.errors import InputError, StateError
 from demcli.measure.regions import MEASURE, check_box as _check_box
 from demcli.stages.base import ENGINE_KEEPS, ENGINE_OUTPUT, StageType, has_field, register_stage
@@ -81,6 +81,17 @@ FIELDS_SECTION = Section({
     "max": Optional(Vector(3, "m")),
 }, check=_check_fields, doc="coarse graining (Goldhirsch 2010, Weinhart et al. 2012)")
 
+def _check_mesh_wall(node, report):
+    """A mesh file is STL or OBJ (read at the stage start: :func:`demcli.geometry.mesh_file.read_mesh`);
+    the normal has a direction."""
+    from demcli.geometry.mesh_file import SUFFIXES
+
+    if not node.file.lower().endswith(tuple(SUFFIXES)):
+        report("file", f"must be a {' or '.join(sorted(SUFFIXES))} file", node.file)
+    if not any(node.normal):
+        report("normal", "must not be the zero vector", list(node.normal))
+
+
 _RIGID = Bool(default=False, doc="E* and G* from the particle alone (an infinitely stiff wall, as in rigid-body "
                                  "impact tests); the wall's material still gives friction and restitution; "
                                  "linear law: no effect (k_n, k_t are per pair)")
@@ -101,6 +112,18 @@ WALL = Tagged("type", {
         "rigid": _RIGID,
         "motion": Map(MOTION, default={}, doc="motion per face name (x0 ... z1); others fixed"),
     }, check=_check_box),
+    "mesh": Section({
+        "name": Str(default=None),
+        "file": Str(doc="STL (ascii or binary) or OBJ triangle surface, relative to the case file; coincident "
+                        "vertices are merged (the contact of a sphere with the mesh, docs/walls.md)"),
+        "scale": Float(min=0, min_inclusive=False, default=1.0, doc="file units to metres (0.001: millimetres)"),
+        "rotate": Vector(3, "rad", default=(0.0, 0.0, 0.0), doc="turned about the fixed x, then y, then z axis "
+                                                               "(e.g. [0, 180 deg, 0])"),
+        "translation": Vector(3, "m", default=(0.0, 0.0, 0.0), doc="then moved by this"),
+        "normal": Vector(3, default=(0.0, 0.0, 1.0), doc="direction of servo and force motion, into the domain; "
+                                                         "the wall records' position and force are along it"),
+        "material": Str(), "rigid": _RIGID, "motion": MOTION,
+    }, check=_check_mesh_wall, doc="a rigid triangle mesh translating with its motion (spheres and clumps)"),
     "cylinder": Section({
         "name": Str(default=None), "base": Vector(3, "m", doc="point on the axis (bottom)"),
         "axis": Vector(3, default=(0.0, 0.0, 1.0)), "radius": Float("m", min=0, min_inclusive=False),
@@ -313,8 +336,8 @@ def _check_wall_mode(wall_type, motion, where, report):
         report(f"{where}.mode", "a cylinder wall takes fixed, velocity or pressure", motion.mode)
     elif wall_type != "cylinder" and motion.mode == "pressure":
         report(f"{where}.mode", "mode pressure is for cylinder walls", motion.mode)
-    elif wall_type == "plane" and motion.mode == "servo" and motion.area is None:
-        report(f"{where}.area", "a servo plane needs its loaded area (only box faces know theirs)")
+    elif wall_type in ("plane", "mesh") and motion.mode == "servo" and motion.area is None:
+        report(f"{where}.area", f"a servo {wall_type} needs its loaded area (only box faces know theirs)")
 
 
 def scene_check(cfg, case, k, scene, report, shapes=None):
@@ -340,9 +363,8 @@ def scene_check(cfg, case, k, scene, report, shapes=None):
     _measure_check(cfg, case, shapes, report)
     if set(shapes) <= {"polyhedra", "mixed"}:
         for k, w in enumerate(cfg.get("walls", ())):
-            if w.type == "cylinder":
-                report(f"walls.{k}.type", "is not for polyhedra: their wall contact is the overlap with a "
-                       "half-space (plane and box walls)", w.type)
+            if w.type in ("cylinder", "mesh"):
+                report(f"walls.{k}.type", f"is not for polyhedra: {EFFECTS['walls'].limits['polyhedra']}", w.type)
 
 
 def _measure_check(cfg, case, shapes, report):
@@ -542,8 +564,68 @@ def lay_walls(cfg, wpoint, groups):
     return out
 
 
-def build_walls(cfg, case):
-    """Walls of the stage config as arrays (box walls become up to six planes)."""
+def _mesh_row(w, where, case_file):
+    """(point, extent, (local vertices, triangles)) of a mesh wall: its file read and placed
+    (:func:`demcli.geometry.mesh_file.read_mesh`; a bad file is a ConfigError naming ``case_file`` and
+    ``where``.file), the wall's point its first vertex, the vertices relative to it [m] (the mesh
+    translates with the point), the drawing extent its bounding box."""
+    from demcli.geometry.mesh_file import read_mesh
+
+    verts, tris = read_mesh(w.file, case_file=case_file, key=f"{where}.file", scale=w.scale,
+                            translation=w.translation, rotate=np.degrees(w.rotate))
+    point = verts[0].copy()
+    return point, np.r_[verts.min(axis=0), verts.max(axis=0)], (np.ascontiguousarray(verts - point), tris)
+
+
+def _wall_control(motion, normal, area, cfg):
+    """(control mode, W_* parameter row, velocity [m/s]) of a wall's ``motion`` (None: fixed);
+    ``area`` [m^2] the loaded area servo and pressure walls take when the motion gives none; a
+    force wall's weight from ``cfg.physics.gravity`` along its ``normal``."""
+    from demcli.kernels import walls as W
+
+    prm = np.zeros(W.N_WPARAMS)
+    control = W.FIXED
+    v = np.zeros(3)
+    mode = motion.mode if motion is not None else "fixed"
+    if mode == "velocity":
+        control, v = W.VELOCITY, np.array(motion.velocity)
+    elif mode == "servo":
+        control = W.SERVO
+        prm[W.W_TARGET] = motion.stress
+        prm[W.W_GAIN] = motion.gain
+        prm[W.W_VMAX] = motion.max_speed
+        prm[W.W_AREA] = motion.area if motion.area is not None else area
+    elif mode == "pressure":
+        control = W.PRESSURE
+        prm[W.W_TARGET] = motion.pressure
+        prm[W.W_MASS] = motion.mass
+        prm[W.W_AREA] = motion.area if motion.area is not None else area
+    elif mode == "force":
+        control = W.FORCE
+        prm[W.W_TARGET] = motion.force
+        prm[W.W_AMPLITUDE] = motion.amplitude
+        prm[W.W_FREQ] = motion.frequency
+        prm[W.W_PHASE] = motion.phase
+        prm[W.W_START] = motion.start
+        prm[W.W_MASS] = motion.mass
+        if motion.weight:  # a constant force: the weight's component along the normal
+            g = np.asarray(cfg.physics.gravity, float)
+            prm[W.W_TARGET] += motion.mass * float(g @ (np.asarray(normal, float) / np.linalg.norm(normal)))
+    return control, prm, v
+
+
+def check_mesh_files(cfg, case_file, where):
+    """Read the mesh walls' files of a stage config (relative to ``case_file``): a missing,
+    unreadable or degenerate one is a ConfigError naming ``where``[k].file (exit code 2), found
+    when the case is loaded rather than when its stage starts."""
+    for k, w in enumerate(cfg.get("walls", ())):
+        if w.type == "mesh":
+            _mesh_row(w, f"{where}[{k}]", case_file)
+
+
+def build_walls(cfg, case, case_file=None, where="walls"):
+    """Walls of the stage config as arrays (box walls become up to six planes, mesh files are read:
+    relative to ``case_file``'s folder, errors naming ``where``[k])."""
     from demcli.engine.system import Walls
     from demcli.kernels import walls as W
 
@@ -553,43 +635,20 @@ def build_walls(cfg, case):
     def rigid(w):  # (the walls some stages build in code leave it out)
         return bool(w.get("rigid", False))
 
-    def add(name, kind, point, normal, radius, material, motion, extent, area, rigid):
-        prm = np.zeros(W.N_WPARAMS)
-        control = W.FIXED
-        v = np.zeros(3)
-        mode = motion.mode if motion is not None else "fixed"
-        if mode == "velocity":
-            control, v = W.VELOCITY, np.array(motion.velocity)
-        elif mode == "servo":
-            control = W.SERVO
-            prm[W.W_TARGET] = motion.stress
-            prm[W.W_GAIN] = motion.gain
-            prm[W.W_VMAX] = motion.max_speed
-            prm[W.W_AREA] = motion.area if motion.area is not None else area
-        elif mode == "pressure":
-            control = W.PRESSURE
-            prm[W.W_TARGET] = motion.pressure
-            prm[W.W_MASS] = motion.mass
-            prm[W.W_AREA] = motion.area if motion.area is not None else area
-        elif mode == "force":
-            control = W.FORCE
-            prm[W.W_TARGET] = motion.force
-            prm[W.W_AMPLITUDE] = motion.amplitude
-            prm[W.W_FREQ] = motion.frequency
-            prm[W.W_PHASE] = motion.phase
-            prm[W.W_START] = motion.start
-            prm[W.W_MASS] = motion.mass
-            if motion.weight:  # a constant force: the weight's component along the normal
-                g = np.asarray(cfg.physics.gravity, float)
-                prm[W.W_TARGET] += motion.mass * float(g @ (np.asarray(normal, float) / np.linalg.norm(normal)))
+    def add(name, kind, point, normal, radius, material, motion, extent, area, rigid, mesh=None):
+        control, prm, v = _wall_control(motion, normal, area, cfg)
         n = np.asarray(normal, float)
         rows.append((name, kind, np.asarray(point, float), n / np.linalg.norm(n), radius, names.index(material),
-                     control, prm, v, np.asarray(extent, float), rigid))
+                     control, prm, v, np.asarray(extent, float), rigid, mesh))
 
     for k, w in enumerate(cfg.walls):
         if w.type == "plane":
             ext = w.extent if w.extent is not None else tuple(np.r_[np.array(w.point) - 0.1, np.array(w.point) + 0.1])
             add(w.name or f"wall{k}", W.PLANE, w.point, w.normal, 0.0, w.material, w.motion, ext, math.nan, rigid(w))
+        elif w.type == "mesh":
+            point, ext, mesh = _mesh_row(w, f"{where}[{k}]", case_file)
+            add(w.name or f"wall{k}", W.MESH, point, w.normal, 0.0, w.material, w.motion, ext, math.nan, rigid(w),
+                mesh)
         elif w.type == "cylinder":
             b = np.array(w.base)
             ext = np.r_[b - w.radius, b + w.radius]
@@ -618,8 +677,23 @@ def build_walls(cfg, case):
                       radius=np.array([r[4] for r in rows], float), material=np.array([r[5] for r in rows], np.int64),
                       control=np.array([r[6] for r in rows], np.int8), prm=np.array([r[7] for r in rows]),
                       v=np.array([r[8] for r in rows]), extent=np.array([r[9] for r in rows]),
-                      rigid=np.array([r[10] for r in rows], bool))
+                      rigid=np.array([r[10] for r in rows], bool),
+                      mesh=[r[11] for r in rows] if any(r[11] is not None for r in rows) else None)
     return walls  # the modes each wall type takes are checked at validation (_check_wall_mode)
+
+
+def mesh_digest(cfg, case_dir):
+    """sha256 of the mesh walls' files in order (part of the stage's config hash: an edited mesh runs
+    the stage again); None without mesh walls or when one cannot be read (the run reports that)."""
+    import hashlib
+
+    from demcli.stages.specimen.particles import case_file_path
+
+    files = [w.file for w in cfg.get("walls", ()) if w.type == "mesh"]
+    try:
+        return [hashlib.sha256(case_file_path(case_dir, f).read_bytes()).hexdigest() for f in files] or None
+    except OSError:
+        return None
 
 
 def run(ctx, cfg, state_in):
@@ -640,5 +714,5 @@ def plan_summary(ctx_case, cfg, scene):
 register_stage(StageType(
     "dem", FIELDS, run, needs_input=True, requires=("bodies/x", "spheres/radius"), check=check_stage,
     orders_particles=True, provides=ENGINE_OUTPUT, keeps=ENGINE_KEEPS, config_requires=config_inputs,
-    case_check=scene_check,
+    case_check=scene_check, file_digest=mesh_digest,
     plan=plan_summary, doc="integrate the motion with the declared physics"))

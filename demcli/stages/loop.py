@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from demcli import interrupts
-from demcli.effects import check_shape
+from demcli.effects import EFFECTS, check_shape
 from demcli.errors import InputError, StageError
 from demcli.measure.stage import StageMeasures
 from demcli.progress import StopForecast
@@ -51,7 +51,7 @@ def make_system(ctx, cfg, groups, time=0.0, step=0, resume=False):
     from demcli.engine.system import Dynamics, System
     from demcli.kernels.walls import PLANE
 
-    walls = build_walls(cfg, ctx.case)
+    walls = build_walls(cfg, ctx.case, ctx.runner.case_path, f"stages[{ctx.index}].walls")
     shape = scene_shape(groups)
     declared = declared_effects(cfg, ctx.case.dimension)
     bonded = cfg.get("bonds") is not None or len(groups.get("bonds", {}).get("i", ())) > 0
@@ -60,8 +60,7 @@ def make_system(ctx, cfg, groups, time=0.0, step=0, resume=False):
     # every effect on a shape it runs on (demcli check refuses the rest already, where it knows the shape)
     check_shape(plan.effects, shape, ctx.name)
     if shape in ("polyhedra", "mixed") and np.any(np.asarray(walls.kind) != PLANE):
-        raise InputError(f"stage {ctx.name}: walls: a scene with polyhedra takes plane and box walls only "
-                         "(a polyhedron's wall contact is its overlap with a half-space)")
+        raise InputError(f"stage {ctx.name}: walls: a scene with polyhedra takes {EFFECTS['walls'].limits[shape]}")
     p = cfg.physics
     dyn = Dynamics(gravity=tuple(p.gravity) if p.gravity is not None else (0.0, 0.0, 0.0),
                    local_damping=p.local_damping or 0.0, viscous_damping=p.viscous_damping or 0.0,
@@ -97,15 +96,16 @@ def make_system(ctx, cfg, groups, time=0.0, step=0, resume=False):
 
 class StageSnapshots:
     """Sphere and polyhedron snapshots plus walls (a mixed scene writes both series, numbered
-    alike), one ``write(state)`` and ``truncate(time)``."""
+    alike), one ``write(state)`` and ``truncate(time)``; ``meshes``: the mesh walls' triangles
+    (:attr:`demcli.engine.system.Walls.mesh`, sphere and clump scenes)."""
 
-    def __init__(self, folder, shape, resume):
+    def __init__(self, folder, shape, resume, meshes=None):
         from demcli.state.vtu import PvdSeries, Snapshots
         from demcli.state.vtu_poly import PolyhedraSnapshots
 
         self.folder = Path(folder)
         # the sphere series writes the walls (and bonds) beside its spheres
-        self.spheres = Snapshots(folder, resume=resume) if shape != "polyhedra" else None
+        self.spheres = Snapshots(folder, resume=resume, meshes=meshes) if shape != "polyhedra" else None
         self.polyhedra = PolyhedraSnapshots(folder, resume=resume) if shape in ("polyhedra", "mixed") else None
         self.walls = PvdSeries(self.folder / "walls.pvd", resume=resume) if self.spheres is None else None
 
@@ -234,7 +234,7 @@ def integrate(ctx, cfg, state_in, hooks=None):
     measures = StageMeasures.make(ctx, cfg, system, ckpt, plan.has("planar"))
     ended = None if ckpt is None else ckpt.groups["checkpoint"].get("ended")  # the loop had ended: why
     ended = None if ended is None else str(ended)
-    snaps = StageSnapshots(ctx.snapshot_dir, system.plugin.name, resume=ckpt is not None)
+    snaps = StageSnapshots(ctx.snapshot_dir, system.plugin.name, resume=ckpt is not None, meshes=system.walls.mesh)
     if ckpt is not None:  # a checkpoint of the loop's end writes the final snapshot again
         snaps.truncate(system.time if ended is None else math.nextafter(system.time, -math.inf))
         if measures is not None:

@@ -224,12 +224,15 @@ _reg("materials", "restitution", "f", ("n_m",), "1", "coefficient of restitution
 _reg("materials", "shear", "f", ("n_m",), "Pa", "shear modulus G of the tangential stiffness: the case's, else "
      "E / (2 (1 + nu))", required=False, finite=True, positive=True)
 
-register_group("walls", "Rigid walls: planes and cylinders", writer="effect walls")
+register_group("walls", "Rigid walls: planes, cylinders and triangle meshes (a mesh's triangles are read from "
+               "its case file, docs/walls.md)", writer="effect walls")
 _W = dict(writer="effect walls")
 _reg("walls", "name", "str", ("n_w",), "", "wall name from the case", **_W)
-_reg("walls", "kind", "i", ("n_w",), "", "0 plane, 1 cylinder", dtype="int8", **_W)
-_reg("walls", "point", "f", ("n_w", 3), "m", "a point on the plane; a point on the cylinder axis", **_W, finite=True)
-_reg("walls", "normal", "f", ("n_w", 3), "1", "plane normal into the domain; cylinder axis", **_W, finite=True,
+_reg("walls", "kind", "i", ("n_w",), "", "0 plane, 1 cylinder, 2 mesh", dtype="int8", **_W)
+_reg("walls", "point", "f", ("n_w", 3), "m", "a point on the plane; a point on the cylinder axis; a mesh's first "
+     "vertex (the mesh translates with it)", **_W, finite=True)
+_reg("walls", "normal", "f", ("n_w", 3), "1", "plane normal into the domain; cylinder axis; a mesh's direction of servo "
+     "and force motion", **_W, finite=True,
      unit_rows=True)
 _reg("walls", "radius", "f", ("n_w",), "m", "cylinder radius (unused for planes)", **_W, finite=True)
 _reg("walls", "v", "f", ("n_w", 3), "m/s", "wall velocity", **_W, finite=True)

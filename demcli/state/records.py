@@ -340,12 +340,13 @@ describe_column("<wall>.position", "Wall <wall> position", "m", "mm", 1e3, table
                 doc="point . n, n the wall's unit normal pointing into the domain: the plane's signed "
                     "coordinate along n, growing as the wall moves into the domain (box face x0 at x = a: +a; "
                     "x1 at x = b: -b; the box width is -(x0 + x1)); a cylinder's n is its axis, so this is "
-                    "the axial position of its axis point (its radius is walls/radius in the state)")
+                    "the axial position of its axis point (its radius is walls/radius in the state); a mesh "
+                    "wall's n is its `normal` (servo and force direction), point its first vertex")
 describe_column("<wall>.force", "Wall <wall> force", "N", table="walls",
                 doc="-F . n, F the total force of the particles on the wall: the normal force with which "
                     "the particles press the wall outwards, positive in compression (a wall holding the "
                     "specimen in); a cylinder's n is its axis, so this is the axial (friction) force, not "
-                    "the radial pressure")
+                    "the radial pressure; a mesh wall's F sums all its contacts")
 
 
 # ---------------------------------------------------------------------------------------

@@ -5,7 +5,8 @@ Spheres become vertex cells at their world centres with point data ``radius``,
 particle sets of a ``generate`` stage, ``set``; in
 ParaView apply *Glyph* (Sphere, scale by ``diameter``, scale factor 1). Walls become a
 quad surface: planes clipped to their ``extent`` box, cylinders as a 48-sided tube
-spanning the extent along the axis, with cell data ``wall``, ``kind``, ``control``,
+spanning the extent along the axis; mesh walls are a second block of triangles where they are now
+(their vertices relative to the wall's point, given by the stage); all with cell data ``wall``, ``kind``, ``control``,
 ``velocity`` and ``force``. Bonds become line cells between the centres of the two
 spheres, with cell data ``state`` (0 intact, 1 broken in tension, 2 in shear), ``model``,
 ``force_n`` (compression positive) and ``force_s`` (magnitude); in ParaView apply *Extract
@@ -120,62 +121,61 @@ def _cylinder_surface(point, axis, radius, extent, segments=CYLINDER_SEGMENTS):
     return pts, quads
 
 
-def wall_mesh(state) -> meshio.Mesh:
-    """The walls of a State as a meshio Mesh of quads (see module doc)."""
-    points, quads, owner = [], [], []
+def _wall_surface(state, k, meshes):
+    """(cell type, points, cells) of wall k: triangles of a mesh wall at its point now, quads
+    otherwise; None for a wall without a drawable extent."""
+    extent = np.asarray(state["walls/extent"][k], dtype=float)
+    point = np.asarray(state["walls/point"][k], dtype=float)
+    normal = np.asarray(state["walls/normal"][k], dtype=float)
+    if meshes is not None and meshes[k] is not None:
+        return "triangle", point + np.asarray(meshes[k][0], float), np.asarray(meshes[k][1], np.int64)
+    if not (np.all(np.isfinite(extent)) and np.linalg.norm(normal) > 0):
+        return None
+    if int(state["walls/kind"][k]) == 1:
+        return ("quad", *_cylinder_surface(point, normal, float(state["walls/radius"][k]), extent))
+    return "quad", _plane_quad(point, normal, extent), np.array([[0, 1, 2, 3]])
+
+
+def wall_mesh(state, meshes=None) -> meshio.Mesh:
+    """The walls of a State as a meshio Mesh of quads, then triangles for mesh walls (see module doc;
+    ``meshes``: per wall (vertices relative to its point [m], triangles) or None, as
+    :attr:`demcli.engine.system.Walls.mesh`)."""
     n_w = len(state["walls/kind"]) if "walls/kind" in state else 0
-    offset = 0
+    points, blocks, offset = [], {"quad": ([], []), "triangle": ([], [])}, 0
     for k in range(n_w):
-        extent = np.asarray(state["walls/extent"][k], dtype=float)
-        point = np.asarray(state["walls/point"][k], dtype=float)
-        normal = np.asarray(state["walls/normal"][k], dtype=float)
-        if not (np.all(np.isfinite(extent)) and np.linalg.norm(normal) > 0):
+        surface = _wall_surface(state, k, meshes)
+        if surface is None:
             continue
-        if int(state["walls/kind"][k]) == 1:
-            pts, q = _cylinder_surface(point, normal, float(state["walls/radius"][k]), extent)
-        else:
-            pts, q = _plane_quad(point, normal, extent), np.array([[0, 1, 2, 3]])
+        ctype, pts, cells = surface
         points.append(pts)
-        quads.append(q + offset)
-        owner += [k] * len(q)
+        blocks[ctype][0].append(cells + offset)
+        blocks[ctype][1].extend([k] * len(cells))
         offset += len(pts)
     pts = np.concatenate(points) if points else np.zeros((0, 3))
-    cells = np.concatenate(quads).astype(np.int64) if quads else np.zeros((0, 4), dtype=np.int64)
-    owner = np.asarray(owner, dtype=np.int64)
 
-    def per_cell(name, width=None, dtype=np.float64):
+    def per_cell(name, owner, width=None, dtype=np.float64):
         if n_w == 0:
             return np.zeros((0, width) if width else 0, dtype=dtype)
         return np.asarray(state[f"walls/{name}"], dtype=dtype)[owner]
 
-    cell_data = {
-        "wall": [owner],
-        "kind": [per_cell("kind", dtype=np.int64)],
-        "control": [per_cell("control", dtype=np.int64)],
-        "velocity": [per_cell("v", 3)],
-        "force": [per_cell("force", 3)],
-    }
-    return meshio.Mesh(pts, [("quad", cells)], cell_data=cell_data)
+    cells, cell_data = [], {key: [] for key in ("wall", "kind", "control", "velocity", "force")}
+    for ctype, width in (("quad", 4), ("triangle", 3)):
+        parts, owner = blocks[ctype]
+        if not owner and (ctype == "triangle" or blocks["triangle"][1]):  # meshio: no empty block before another
+            continue
+        owner = np.asarray(owner, dtype=np.int64)
+        cells.append((ctype, np.concatenate(parts).astype(np.int64) if parts else np.zeros((0, width), np.int64)))
+        for key, data in (("wall", owner), ("kind", per_cell("kind", owner, dtype=np.int64)),
+                          ("control", per_cell("control", owner, dtype=np.int64)),
+                          ("velocity", per_cell("v", owner, 3)), ("force", per_cell("force", owner, 3))):
+            cell_data[key].append(data)
+    return meshio.Mesh(pts, cells, cell_data=cell_data)
 
 
-def mesh_wall_surface(verts, tris, wall, velocity=(0.0, 0.0, 0.0), force=(0.0, 0.0, 0.0)) -> meshio.Mesh:
-    """A mesh wall as a triangle surface: verts (nv, 3) [m] where the wall is now, tris (nt, 3);
-    cell data ``wall`` (its index), ``velocity`` [m/s] and ``force`` [N] (the wall's, on every cell)."""
-    nt = len(tris)
-    cell_data = {"wall": [np.full(nt, wall, np.int64)],
-                 "velocity": [np.tile(np.asarray(velocity, float), (nt, 1))],
-                 "force": [np.tile(np.asarray(force, float), (nt, 1))]}
-    return meshio.Mesh(np.asarray(verts, float), [("triangle", np.asarray(tris, np.int64))], cell_data=cell_data)
-
-
-def write_mesh_wall_vtu(path, verts, tris, wall, velocity=(0.0, 0.0, 0.0), force=(0.0, 0.0, 0.0)) -> Path:
-    """Write one mesh wall as a binary VTU triangle surface (atomically); returns the path."""
-    return _write_mesh(path, mesh_wall_surface(verts, tris, wall, velocity, force))
-
-
-def write_walls_vtu(path, state) -> Path:
-    """Write the walls of ``state`` as a binary VTU surface (atomically); returns the path."""
-    return _write_mesh(path, wall_mesh(state))
+def write_walls_vtu(path, state, meshes=None) -> Path:
+    """Write the walls of ``state`` as a binary VTU surface (atomically; ``meshes`` as for
+    :func:`wall_mesh`); returns the path."""
+    return _write_mesh(path, wall_mesh(state, meshes))
 
 
 class PvdSeries:
@@ -229,8 +229,9 @@ class Snapshots:
     (and ``walls_000000.vtu`` when the state has walls) at ``state.meta['time']``.
     """
 
-    def __init__(self, folder, *, resume: bool = False):
+    def __init__(self, folder, *, resume: bool = False, meshes=None):
         self.folder = Path(folder)
+        self.meshes = meshes  # the mesh walls' triangles (wall_mesh), None without
         self.spheres = PvdSeries(self.folder / "spheres.pvd", resume=resume)
         self.walls = PvdSeries(self.folder / "walls.pvd", resume=resume)
         self.bonds = PvdSeries(self.folder / "bonds.pvd", resume=resume)
@@ -241,7 +242,7 @@ class Snapshots:
         out = [write_spheres_vtu(self.folder / f"spheres_{self.count:06d}.vtu", state)]
         self.spheres.add(time, out[-1])
         if "walls/kind" in state and len(state["walls/kind"]):
-            out.append(write_walls_vtu(self.folder / f"walls_{self.count:06d}.vtu", state))
+            out.append(write_walls_vtu(self.folder / f"walls_{self.count:06d}.vtu", state, self.meshes))
             self.walls.add(time, out[-1])
         if "bonds/i" in state and len(state["bonds/i"]):
             out.append(write_bonds_vtu(self.folder / f"bonds_{self.count:06d}.vtu", state))

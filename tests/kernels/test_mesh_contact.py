@@ -6,7 +6,8 @@ a concave corner gives both faces, a convex edge one contact along the edge's no
 import numpy as np
 import pytest
 
-from demcli.kernels.mesh import MAX_TOUCH, bin_triangles, closest_on_triangle, sphere_mesh_contacts
+from demcli.kernels.mesh import (MAX_TOUCH, bin_triangles, closest_on_triangle, mesh_arrays, mesh_of,
+                                 sphere_mesh_contacts)
 
 TOL = 1e-12
 
@@ -29,11 +30,10 @@ def brute_closest(p, a, b, c, n=400):
 def contacts(centre, r, verts, tris, cell):
     """(triangles, points, normals, overlaps) of one sphere, through the kernel."""
     grid = bin_triangles(verts, tris, cell)
-    mark = np.zeros(len(tris), np.int64)
-    t, q, n, d = (np.empty(MAX_TOUCH, np.int64), np.empty((MAX_TOUCH, 3)), np.empty((MAX_TOUCH, 3)),
+    t, q, n, s = (np.empty(MAX_TOUCH, np.int64), np.empty((MAX_TOUCH, 3)), np.empty((MAX_TOUCH, 3)),
                   np.empty(MAX_TOUCH))
-    k = sphere_mesh_contacts(np.asarray(centre, float), r, verts, tris, *grid, cell, mark, 1, t, q, n, d)
-    return t[:k], q[:k], n[:k], d[:k]
+    k = sphere_mesh_contacts(np.asarray(centre, float), r, verts, tris, *grid, cell, t, q, n, s)
+    return t[:k], q[:k], n[:k], r - s[:k]
 
 
 def test_closest_point_matches_brute_force():
@@ -128,3 +128,20 @@ def test_convex_edge_gives_one_contact_along_its_normal():
     np.testing.assert_allclose(q[0], [0, 0.5, 0], atol=TOL)
     np.testing.assert_allclose(n[0], [2 ** -0.5, 0, 2 ** -0.5], atol=TOL)
     np.testing.assert_allclose(delta[0], 0.1 - a * 2 ** 0.5, rtol=TOL)
+
+
+def test_mesh_arrays_give_each_wall_its_own_mesh_and_grid(grid_mesh):
+    # Given four walls, the second and the fourth meshes of 8 and 18 triangles
+    a, ta, _ = grid_mesh(2, 0.1)
+    b, tb, _ = grid_mesh(3, 0.05, shift=(1.0, 0.0, 0.0))
+    mesh = mesh_arrays([None, (a, ta), None, (b, tb)])
+    # When wall w's arrays are taken out
+    for w, (verts, tris) in ((1, (a, ta)), (3, (b, tb))):
+        v, t, lo, dims, cstart, clist, cell = mesh_of(mesh, w)
+        # Then they are its mesh and the grid bin_triangles makes of it, at its cell size
+        np.testing.assert_array_equal(v, verts)
+        np.testing.assert_array_equal(t, tris)
+        for got, want in zip((lo, dims, cstart, clist), bin_triangles(verts, tris, cell)):
+            np.testing.assert_array_equal(got, want)
+    # and the other walls hold none
+    assert all(len(x) == 0 for x in mesh_of(mesh, 0)[:2] + mesh_of(mesh, 2)[:2])

@@ -1,4 +1,4 @@
-"""Loads of a triangle-mesh wall on spheres (demcli.kernels.mesh_forces) against the analytic plane
+"""Loads of a triangle-mesh wall on a sphere (demcli.kernels.shapes.spheres._mesh_contact) against the analytic plane
 z = 0 through the same contact law: a ball bouncing and sliding with spin on a jittered mesh floor
 follows the plane ball to round-off (the tangential spring carried across triangle edges), and a
 floor moving up strikes a resting ball away."""
@@ -6,8 +6,8 @@ floor moving up strikes a resting ball away."""
 import numpy as np
 
 from demcli.kernels.contact import LINEAR, N_PARAMS, P_ARM, P_CTR, P_KN, P_KT, P_MU, P_NOTENSION, P_ZETA, contact_law
-from demcli.kernels.mesh import bin_triangles
-from demcli.kernels.mesh_forces import sphere_mesh_forces
+from demcli.kernels.mesh import mesh_arrays
+from demcli.kernels.shapes.spheres import _mesh_contact
 
 R, MASS, DT = 0.01, 0.01, 2e-5
 G = np.array([0.0, 0.0, -9.81])
@@ -32,12 +32,12 @@ def plane_loads(x, v, w, ft, prm):
     return f, -a * np.cross(n, f)
 
 
-def mesh_loads(x, v, w, ft, prm, mesh, wv=np.zeros(3)):
-    verts, tris, grid = mesh
-    fs, ts = np.zeros((1, 3)), np.zeros((1, 3))
-    sphere_mesh_forces(x[None], v[None], w[None], np.array([R]), np.zeros(1, np.int64), np.array([MASS]), verts, tris,
-                       *grid, 0.05, wv, 0, prm, LINEAR, DT, ft, True, fs, ts)
-    return fs[0], ts[0]
+def mesh_loads(x, v, w, ft, prm, mesh, point=np.zeros(3), wv=np.zeros(3)):
+    """Force and torque of the mesh wall (MeshArrays of one wall, its point ``point``) on the sphere."""
+    out = _mesh_contact(0, 0, 0, x[None], v[None], w[None], np.array([R]), np.zeros(1, np.int64), np.array([MASS]),
+                        point[None], wv[None], np.zeros(1, np.int64), prm, LINEAR, DT, ft, np.zeros((0, 3)), True,
+                        False, mesh)
+    return np.array(out[:3]), np.array(out[3:6])
 
 
 def run(loads, steps, x, v, w):
@@ -59,7 +59,7 @@ def test_ball_on_mesh_floor_follows_the_plane_ball(grid_mesh):
     # sliding fast with backspin, so that it bounces, slides and rolls across many edges
     prm = materials()
     verts, tris, _ = grid_mesh(10, 0.03, seed=4)
-    mesh = (verts, tris, bin_triangles(verts, tris, 0.05))
+    mesh = mesh_arrays([(verts, tris)])
     x0, v0, w0 = np.array([0.02, 0.03, 0.012]), np.array([0.6, 0.35, -0.2]), np.array([5.0, -20.0, 3.0])
     # When both run 12000 steps (0.24 s)
     xm, vm, fm = run(lambda x, v, w, ft: mesh_loads(x, v, w, ft, prm, mesh), 12000, x0, v0, w0)
@@ -78,9 +78,9 @@ def test_rising_floor_strikes_a_ball_away(grid_mesh):
     x, v, w = np.array([0.05, 0.05, R]), np.zeros(3), np.zeros(3)
     ft = np.zeros((1, 3))
     up = np.array([0.0, 0.0, 0.05])
+    mesh = mesh_arrays([(verts, tris)])
     for step in range(4000):
-        moved = verts + up * DT * step
-        f, _ = mesh_loads(x, v, w, ft, prm, (moved, tris, bin_triangles(moved, tris, 0.05)), up)
+        f, _ = mesh_loads(x, v, w, ft, prm, mesh, up * DT * step, up)
         v = v + DT * f / MASS
         x = x + DT * v
     # Then the ball is struck away: restitution e ~ 0.53 (damping ratio 0.2) sends it up at

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from demcli.state.fields import example_state
-from demcli.state.vtu import PvdSeries, Snapshots, write_mesh_wall_vtu, write_spheres_vtu, write_walls_vtu
+from demcli.state.vtu import PvdSeries, Snapshots, write_spheres_vtu, write_walls_vtu
 
 
 @pytest.fixture
@@ -97,17 +97,19 @@ def test_pvd_resume_keeps_entries(tmp_path, state):
     assert [e[0] for e in PvdSeries(tmp_path / "s.pvd", resume=True).entries] == [0.25]
 
 
-def test_mesh_wall_vtu_round_trip(tmp_path):
-    # Given a mesh wall of two triangles, moved and loaded
-    verts = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], float) + [0.0, 0.0, 0.25]
+def test_mesh_wall_vtu_round_trip(tmp_path, state):
+    # Given the example walls (two planes and a cylinder) with the last one a mesh wall of two
+    # triangles instead, its point moved to z = 0.25 and loaded
+    verts = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], float)
     tris = np.array([[0, 1, 2], [0, 2, 3]])
-    # When it is written as a snapshot
-    path = write_mesh_wall_vtu(tmp_path / "mesh_000001.vtu", verts, tris, 6, velocity=(0, 0, -0.1),
-                               force=(0, 0, 12.5))
-    # Then meshio reads the same triangles, points and wall data back
-    back = meshio.read(path)
-    assert back.cells[0].type == "triangle"
-    np.testing.assert_array_equal(back.cells[0].data, tris)
-    np.testing.assert_array_equal(back.points, verts)
-    np.testing.assert_array_equal(back.cell_data["wall"][0], [6, 6])
-    np.testing.assert_array_equal(back.cell_data["force"][0], [[0, 0, 12.5]] * 2)
+    state["walls/kind"] = np.array([0, 0, 2], np.int8)
+    state["walls/point"] = np.array([[0, 0, 0], [0, 0, 0], [0, 0, 0.25]], float)
+    state["walls/force"] = np.array([[0, 0, 1.0], [1.0, 0, 0], [0, 0, 12.5]])
+    # When the walls are written with the mesh and read back with meshio
+    back = meshio.read(write_walls_vtu(tmp_path / "walls_000001.vtu", state, [None, None, (verts, tris)]))
+    # Then the planes are quads and the mesh its triangles where its point is now, with its wall data
+    assert [c.type for c in back.cells] == ["quad", "triangle"] and len(back.cells[0].data) == 2
+    np.testing.assert_array_equal(back.points[back.cells[1].data], (verts + [0, 0, 0.25])[tris])
+    np.testing.assert_array_equal(back.cell_data["wall"][1], [2, 2])
+    np.testing.assert_array_equal(back.cell_data["kind"][1], [2, 2])
+    np.testing.assert_array_equal(back.cell_data["force"][1], [[0, 0, 12.5]] * 2)

@@ -203,7 +203,7 @@ def wall_pass(g, bd, nl, wa, prm, law, flags, dt):
     pg = g.poly
     S._wall_forces(nl.wprim, nl.wwall, sg.xs, sg.vs, sg.ws, sg.rad, sg.mat, sg.smass, wa.kind, wa.point, wa.normal,
                    wa.radius, wa.v, wa.material, prm, law, dt, nl.wft, nl.wmr, flags[F_FRICTION], flags[F_ROLLING],
-                   flags[F_ENERGY], nl.wfc, nl.wtq, nl.wen, g.ns)
+                   flags[F_ENERGY], nl.wfc, nl.wtq, nl.wen, g.ns, wa.mesh)
     P._wall_forces(nl.wstart, nl.wwall, sg.xs, sg.vs, sg.ws, sg.smass, pg.rad, pg.mat, pg.shape, pg.vertex_start,
                    pg.face_start, pg.fvstart, pg.fverts, pg.bvstart, pg.bfstart, pg.wvert, pg.wnorm, pg.woff, wa.kind,
                    wa.point, wa.normal, wa.v, wa.material, g.qprm, dt, flags[F_FRICTION], flags[F_DASHPOT],

@@ -13,6 +13,8 @@ then bonds), ``wall_pass`` (sphere-wall, planes and cylinders), ``worst_overlap`
 import math
 from collections import namedtuple
 
+import numpy as np
+
 from numba import prange
 
 from demcli.jit import njit
@@ -21,8 +23,9 @@ from demcli.kernels.bonds import bond_forces
 from demcli.kernels.contact import (HERTZ, P_ARM, P_CN, P_ESTAR, P_KN, P_ZETA, contact_law, pair_kinematics,
                                    strain_energy)
 from demcli.kernels.layout import F_BONDS, F_CLUMPS, F_ENERGY, F_FRICTION, F_ROLLING
+from demcli.kernels.mesh import wall_features
 from demcli.kernels.switch import choose
-from demcli.kernels.walls import wall_distance
+from demcli.kernels.walls import MESH, surface_distance, wall_distance
 
 SphereGeometry = namedtuple("SphereGeometry", "xs vs ws rad mat smass sbody soff")
 """Spheres: xs, vs, ws (n_s, 3) position, velocity and spin of each sphere (for spheres-only
@@ -158,10 +161,21 @@ def _pair_forces(start, pj, xs, vs, ws, rad, smat, smass, prm, law, dt, ft, mr, 
 @njit(inline="always")
 def _wall_contact(i, k, w, xs, vs, ws, rad, smat, smass, wkind, wpoint, wnormal, wradius, wv, wmat,
                   prm, law, dt, wft, wmr, friction, rolling):
-    """Force and torque on sphere i from wall w (history row k); zero when apart."""
+    """Force and torque on sphere i from plane or cylinder wall w (history row k); zero when apart."""
     s, nx, ny, nz = wall_distance(wkind[w], wpoint[w, 0], wpoint[w, 1], wpoint[w, 2],
                                   wnormal[w, 0], wnormal[w, 1], wnormal[w, 2], wradius[w],
                                   xs[i, 0], xs[i, 1], xs[i, 2])
+    return _surface_contact(i, w, s, nx, ny, nz, xs, vs, ws, rad, smat, smass, wv, wmat, prm, law, dt, wft, wmr, k,
+                            friction, rolling)
+
+
+@njit(inline="always")
+def _surface_contact(i, w, s, nx, ny, nz, xs, vs, ws, rad, smat, smass, wv, wmat, prm, law, dt, wft, wmr, k,
+                     friction, rolling):
+    """Force and torque on sphere i from wall w at distance s [m] from its surface along the unit
+    normal n (wall to sphere), springs in row k of wft, wmr; zero (springs cleared) when apart.
+    Returns (F (3) [N], torque (3) [N m], dashpot and slip losses [J], servo stiffness k_n + c_n/dt
+    [N/m], normal force F . n [N])."""
     ri = rad[i]
     delta = ri - s
     if delta <= 0.0:
@@ -201,6 +215,33 @@ def _wall_contact(i, k, w, xs, vs, ws, rad, smat, smass, wkind, wpoint, wnormal,
     if dt > 0.0:
         kn += cn / dt
     return fx, fy, fz, tx, ty, tz, ed, ef, kn, fx * nx + fy * ny + fz * nz
+
+
+@njit
+def _mesh_contact(i, k, w, xs, vs, ws, rad, smat, smass, wpoint, wv, wmat, prm, law, dt, wft, wmr, friction,
+                  rolling, mesh):
+    """Loads of mesh wall w on sphere i: the sum over its contacts, one per touched feature
+    (:func:`demcli.kernels.mesh.wall_contacts`), of the plane wall's contact (:func:`_surface_contact`)
+    at each feature's distance s and normal n: F = sum_m F(s_m, n_m) [N]. The nearest feature
+    carries the sphere's springs against the mesh (row k: kept across triangle edges); the others
+    (a concave corner) start theirs afresh each step. One face contact: the plane's arithmetic."""
+    count, near, nrm, s = wall_features(mesh, w, wpoint[w, 0], wpoint[w, 1], wpoint[w, 2], xs[i, 0], xs[i, 1],
+                                        xs[i, 2], rad[i])
+    fresh_ft = np.zeros((1, 3))
+    fresh_mr = np.zeros((1, 3))
+    out = _surface_contact(i, w, rad[i] if count == 0 else s[near], 0.0 if count == 0 else nrm[near, 0],
+                           0.0 if count == 0 else nrm[near, 1], 1.0 if count == 0 else nrm[near, 2], xs, vs, ws,
+                           rad, smat, smass, wv, wmat, prm, law, dt, wft, wmr, k, friction, rolling)
+    for m in range(count):
+        if m == near:
+            continue
+        fresh_ft[0, :] = 0.0
+        fresh_mr[0, :] = 0.0
+        add = _surface_contact(i, w, s[m], nrm[m, 0], nrm[m, 1], nrm[m, 2], xs, vs, ws, rad, smat, smass, wv, wmat,
+                               prm, law, dt, fresh_ft, fresh_mr, 0, friction, rolling)
+        out = (out[0] + add[0], out[1] + add[1], out[2] + add[2], out[3] + add[3], out[4] + add[4], out[5] + add[5],
+               out[6] + add[6], out[7] + add[7], out[8] + add[8], out[9] + add[9])
+    return out
 
 
 @njit
@@ -247,21 +288,30 @@ def wall_pass(g, bd, nl, wa, prm, law, flags, dt):
     normal force), wtq[k] (torque), wen[k] (dashpot and slip losses, with energy)."""
     _wall_forces(nl.wprim, nl.wwall, g.xs, g.vs, g.ws, g.rad, g.mat, g.smass, wa.kind, wa.point, wa.normal,
                  wa.radius, wa.v, wa.material, prm, law, dt, nl.wft, nl.wmr, flags[F_FRICTION], flags[F_ROLLING],
-                 flags[F_ENERGY], nl.wfc, nl.wtq, nl.wen, None)
+                 flags[F_ENERGY], nl.wfc, nl.wtq, nl.wen, None, wa.mesh)
 
 
 @njit(parallel=True, internal=True)
 def _wall_forces(wprim, wwall, xs, vs, ws, rad, smat, smass, wkind, wpoint, wnormal, wradius, wv, wmat, prm, law,
-                 dt, wft, wmr, friction, rolling, energy, wfc, wtq, wen, split):
+                 dt, wft, wmr, friction, rolling, energy, wfc, wtq, wen, split, mesh):
     """Every sphere-wall contact k (prange over contacts: each writes its own rows); ``split``
-    as in :func:`_pair_forces` (a mixed scene: the contacts of primitives below it only)."""
+    as in :func:`_pair_forces` (a mixed scene: the contacts of primitives below it only); ``mesh``
+    the MeshArrays of the mesh walls (read only), None without (the mesh path is then not compiled:
+    :mod:`demcli.kernels.switch`)."""
     for k in prange(wprim.shape[0]):
         if split is not None:
             if wprim[k] >= split:
                 continue
-        wfx, wfy, wfz, wtx, wty, wtz, ed, ef, kn, wfn = _wall_contact(
-            wprim[k], k, wwall[k], xs, vs, ws, rad, smat, smass, wkind, wpoint, wnormal, wradius, wv, wmat, prm, law,
-            dt, wft, wmr, friction, rolling)
+        if mesh is None:
+            out = _wall_contact(wprim[k], k, wwall[k], xs, vs, ws, rad, smat, smass, wkind, wpoint, wnormal, wradius,
+                                wv, wmat, prm, law, dt, wft, wmr, friction, rolling)
+        elif wkind[wwall[k]] == MESH:
+            out = _mesh_contact(wprim[k], k, wwall[k], xs, vs, ws, rad, smat, smass, wpoint, wv, wmat, prm, law, dt,
+                                wft, wmr, friction, rolling, mesh)
+        else:
+            out = _wall_contact(wprim[k], k, wwall[k], xs, vs, ws, rad, smat, smass, wkind, wpoint, wnormal, wradius,
+                                wv, wmat, prm, law, dt, wft, wmr, friction, rolling)
+        wfx, wfy, wfz, wtx, wty, wtz, ed, ef, kn, wfn = out
         wfc[k, 0] = wfx
         wfc[k, 1] = wfy
         wfc[k, 2] = wfz
@@ -300,8 +350,9 @@ def worst_overlap(g, nl, wa):
     for k in range(nl.wprim.shape[0]):
         i = nl.wprim[k]
         wl = nl.wwall[k]
-        sd, _, _, _ = wall_distance(wa.kind[wl], wa.point[wl, 0], wa.point[wl, 1], wa.point[wl, 2], wa.normal[wl, 0],
-                                    wa.normal[wl, 1], wa.normal[wl, 2], wa.radius[wl], xs[i, 0], xs[i, 1], xs[i, 2])
+        sd, _, _, _ = surface_distance(wa.kind[wl], wa.point[wl, 0], wa.point[wl, 1], wa.point[wl, 2],
+                                       wa.normal[wl, 0], wa.normal[wl, 1], wa.normal[wl, 2], wa.radius[wl], xs[i, 0],
+                                       xs[i, 1], xs[i, 2], wa.mesh, wl, rad[i])
         ratio = (rad[i] - sd) / rad[i]
         if ratio > worst:
             worst = ratio
@@ -312,7 +363,7 @@ def worst_overlap(g, nl, wa):
 
 @njit
 def total_strain_energy(pi, pj, xs, rad, smat, prm, law, ft, mr, friction, rolling,
-                        wstart, wwall, wkind, wpoint, wnormal, wradius, wmat, wft, wmr):
+                        wstart, wwall, wkind, wpoint, wnormal, wradius, wmat, wft, wmr, mesh):
     """Elastic energy in all contacts [J] (serial, fixed order)."""
     e = 0.0
     for c in range(pi.shape[0]):
@@ -324,21 +375,41 @@ def total_strain_energy(pi, pj, xs, rad, smat, prm, law, ft, mr, friction, rolli
             e += strain_energy(law, prm, smat[i], smat[j], delta, rad[i] * rad[j] / (rad[i] + rad[j]),
                                ft, mr, c, friction, rolling)
     return e + wall_strain_energy(xs, rad, smat, prm, law, wstart, wwall, wkind, wpoint, wnormal, wradius, wmat, wft,
-                                  wmr, friction, rolling)
+                                  wmr, friction, rolling, mesh)
 
 
 @njit
 def wall_strain_energy(xs, rad, smat, prm, law, wstart, wwall, wkind, wpoint, wnormal, wradius, wmat, wft, wmr,
-                       friction, rolling):
-    """Elastic energy in the wall contacts of the spheres 0..len(xs)-1 [J] (serial, fixed order)."""
+                       friction, rolling, mesh):
+    """Elastic energy in the wall contacts of the spheres 0..len(xs)-1 [J] (serial, fixed order);
+    ``mesh``: the mesh walls' MeshArrays, None without."""
     e = 0.0
     for i in range(xs.shape[0]):
         for k in range(wstart[i], wstart[i + 1]):
             wl = wwall[k]
-            s, _, _, _ = wall_distance(wkind[wl], wpoint[wl, 0], wpoint[wl, 1], wpoint[wl, 2],
-                                       wnormal[wl, 0], wnormal[wl, 1], wnormal[wl, 2], wradius[wl],
-                                       xs[i, 0], xs[i, 1], xs[i, 2])
-            delta = rad[i] - s
+            if mesh is not None:  # compiled for scenes with mesh walls only
+                if wkind[wl] == MESH:
+                    e += _mesh_strain_energy(i, k, wl, xs, rad, smat, wmat, prm, law, wpoint, wft, wmr, friction,
+                                             rolling, mesh)
+                    continue
+            sd, _, _, _ = wall_distance(wkind[wl], wpoint[wl, 0], wpoint[wl, 1], wpoint[wl, 2],
+                                        wnormal[wl, 0], wnormal[wl, 1], wnormal[wl, 2], wradius[wl],
+                                        xs[i, 0], xs[i, 1], xs[i, 2])
+            delta = rad[i] - sd
             if delta > 0.0:
                 e += strain_energy(law, prm, smat[i], wmat[wl], delta, rad[i], wft, wmr, k, friction, rolling)
+    return e
+
+
+@njit
+def _mesh_strain_energy(i, k, wl, xs, rad, smat, wmat, prm, law, wpoint, wft, wmr, friction, rolling, mesh):
+    """Elastic energy [J] of sphere i's contacts with mesh wall wl, each feature's, the springs
+    (row k) in the nearest one's (:func:`_mesh_contact`)."""
+    count, near, _, s = wall_features(mesh, wl, wpoint[wl, 0], wpoint[wl, 1], wpoint[wl, 2], xs[i, 0], xs[i, 1],
+                                      xs[i, 2], rad[i])
+    fresh = np.zeros((1, 3))
+    e = 0.0
+    for m in range(count):
+        hist, mr, row = (wft, wmr, k) if m == near else (fresh, fresh, 0)
+        e += strain_energy(law, prm, smat[i], wmat[wl], rad[i] - s[m], rad[i], hist, mr, row, friction, rolling)
     return e

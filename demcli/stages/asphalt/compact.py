@@ -361,5 +361,5 @@ register_stage(StageType(
     "compact", FIELDS, run, check=_check, describe=describe, orders_particles=True,
     requires=("bodies/x", "spheres/radius", "aggregates/volume"),
     provides=ENGINE_OUTPUT + ("compaction/*",), keeps=("aggregates", "seeds", "gradation") + ENGINE_KEEPS,
-    case_check=dem.scene_check, plan=dem.plan_summary,
+    case_check=dem.scene_check, plan=dem.plan_summary, file_digest=dem.mesh_digest,
     doc="box walls press the aggregates (servo stress or target porosity); porosity against time (seed 000)"))

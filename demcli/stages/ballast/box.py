@@ -799,7 +799,7 @@ def _actor_scene_check(cfg, case, k, scene, report):
                "clumps (set shoulders.fill: false)", True)
 
 
-_IO = dict(requires=("bodies/x",), keeps=CARRIED + ENGINE_KEEPS,
+_IO = dict(requires=("bodies/x",), keeps=CARRIED + ENGINE_KEEPS, file_digest=dem.mesh_digest,
            provides=ENGINE_OUTPUT + ("polyhedra/*", "polyhedron_shapes/*", "bed/*"))
 register_stage(StageType("deposit", DEPOSIT, run_deposit, check=_check_deposit, describe=_describe("deposit"), **_IO,
                          case_check=dem.scene_check,
