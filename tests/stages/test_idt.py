@@ -165,8 +165,9 @@ def test_2d_disk_centre_stress_is_the_brazilian_solution(disk):
     print("P", p, "balls", len(pts), "sigma_yy", -sigma[1, 1], "exact", exact[1], "2P/(pi t D)",
           2 * p / (math.pi * t * d), "sigma_xx", -sigma[0, 0], "exact", exact[0], "rel errors", err)
     # Then the tension across the loaded diameter is the Brazilian one (2 P / (pi t D) at the centre; the
-    # mean over the same balls) within 5 % (measured: +4.1 % over the 19 balls within R/4 of the centre,
-    # 2D disk of 367 balls r = 0.5 mm, D = 21 mm, at 0.4 % of D deformation; sigma_xx +3.7 %), and the compression along the load too
+    # mean over the same balls) within 5 %, and the compression along the load too (measured: sigma_yy
+    # +4.1 %, sigma_xx +3.7 % over the 19 balls within R/4 of the centre; 367 balls of r = 0.5 mm,
+    # D = 21 mm, at 0.4 % of D deformation)
     assert abs(err[0]) < 0.05 and abs(err[1]) < 0.05
     # and the loading was quasi-static: no warning, kinetic energy / work small on every counted row
     assert "warning" not in (disk / "log.txt").read_text()

@@ -23,15 +23,15 @@ A section cut by a ``polygons`` stage must be a circle. Bonds: those of the inpu
 Records ``records/<stage>_idt`` (CSV + PNG): time, deformation (the heads' approach), load P
 (the moving head's force, compression positive), nominal stress 2 P / (pi t D), intact and broken
 bonds (tension, shear), and the quasi-static measure E_k / W (the bodies' kinetic energy over the
-head's work until then, :func:`demcli.stages.asphalt.common.kinetic_to_work`). The stage stops after the peak, when the load has fallen below
-``post_peak`` of the peak with at least 1 % of the bonds broken (a failed specimen), or at
-``max_deformation``. Result group
-``idt_result``: peak load, ITS, deformation at the peak, and E_k / W at the peak. A warning
-goes to the log when E_k / W exceeds ``quasi_static`` (0.01) on a row up to the peak, once the
-work has reached 5 % of the work at the peak: 1 % of the work in motion rather than in strain
-and losses means the head's load is within about that of the static one (the 3D smoke case at
-10 mm/s: 1.2e-4, and its ITS moves under 0.1 % when the speed is halved); halve the speed to check. Broken bonds by mode: ``output.force_chains`` writes
-the bonds with their state as VTU lines (docs/measure.md).
+head's work until then, :func:`demcli.stages.asphalt.common.kinetic_to_work`). The stage stops
+after the peak, when the load has fallen below ``post_peak`` of the peak with at least 1 % of the
+bonds broken (a failed specimen), or at ``max_deformation``. Result group ``idt_result``: peak
+load, ITS, deformation at the peak, and E_k / W at the peak. A warning goes to the log when
+E_k / W exceeds ``quasi_static`` (0.01) on a row up to the peak, once the work has reached 5 % of
+the work at the peak: 1 % of the work in motion rather than in strain and losses means the head's load is within about that of the static one (the 3D smoke case at
+10 mm/s: 1.2e-4, and its ITS moves under 0.1 % when the speed is halved); halve the speed to
+check. Broken bonds by mode: ``output.force_chains`` writes the bonds with their state as VTU
+lines (docs/measure.md).
 """
 
 import math
@@ -99,9 +99,9 @@ def _heads(cfg, x, rad, base, thickness):
 
 def _specimen(ctx, groups, x):
     """(D [m] or None, t [m], base (3,) [m]: centre of the disk's lower face) from the sphere
-    centres ``x`` (n, 3) [m]: the prepared
-    cylinder's (3D), or for a 2D section D None (the heads' first distance) and t the case's
-    thickness, the base half a thickness below the disks' plane."""
+    centres ``x`` (n, 3) [m]: the prepared cylinder's (3D), or for a 2D section D None (the
+    heads' first distance) and t the case's thickness, the base half a thickness below the
+    disks' plane."""
     if ctx.case.dimension == 2:
         t, z = planar_slab(ctx.case, x)
         return None, t, np.array([*x[:, :2].mean(axis=0), z - 0.5 * t])
