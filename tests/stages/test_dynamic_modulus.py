@@ -209,3 +209,10 @@ def test_2d_section_smoke_case(tmp_path):
     assert np.all(st["dynamic_modulus_result/frequency_ratio"] < 0.1)
     assert np.all(st["dynamic_modulus_result/kinetic_to_work"] < 0.01)
     assert "warning" not in (tmp_path / "log.txt").read_text()
+
+
+def test_2d_section_without_bonds_is_refused():
+    # the 2D chain ends unbonded: a test stage without bonds in its input must create them
+    res = CliRunner().invoke(cli, ["check", str(SMOKE_2D), "--set", "stages.dm.bonds=null"])
+    assert res.exit_code == 2 and "the input holds no bonds" in res.output and "stages[3].bonds" in res.output
+    assert "Traceback" not in res.output

@@ -214,4 +214,4 @@ def test_2d_idt_on_a_rectangle_is_refused(tmp_path):
     path.write_text(yaml.safe_dump(bad, sort_keys=False))
     result = CliRunner().invoke(cli, ["check", str(path)])
     assert result.exit_code == 2 and "indirect tension is a test of a disk" in result.output
-    assert "stages[3]" in result.output and "Traceback" not in result.output
+    assert "stages[3]" in result.output and "rectangle" in result.output and "Traceback" not in result.output

@@ -119,8 +119,8 @@ def _case_check(cfg, case, k, scene, report):
     lab_case_check(cfg, case, k, scene, report)
     section = earlier_stage(case, k, "polygons") if case.dimension == 2 else None
     if section is not None and section.specimen.shape != "circle":
-        report("", f"indirect tension is a test of a disk: the section of stage {section.name!r} is a "
-                   f"{section.specimen.shape}; give it specimen: {{shape: circle, radius: ...}}")
+        report("", f"indirect tension is a test of a disk: the section of stage {section.name!r} is not one; give "
+                   "it specimen: {shape: circle, radius: ...}", section.specimen.shape)
 
 
 def run_idt(ctx, cfg, state_in):
