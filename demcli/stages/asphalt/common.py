@@ -25,6 +25,14 @@ TEST_TIME = Section({
     "dt_factor": Float(min=0, max=1, min_inclusive=False, default=0.2),
 }, default={}, doc="time step of a test stage (its length follows from the test)")
 
+KINETIC_LIMIT_DOC = ("warn when the kinetic energy exceeds this share of the loading's work W = int F d(delta) on a "
+                     "record row (once W has reached 5 % of its largest value; 0.01: see docs/asphalt_lab.md)")
+WORK_FLOOR = 0.05
+"""Share of the largest loading work from which a row's kinetic energy / work counts for the
+quasi-static warning: before it the ratio compares the first contacts' settling (a surface sphere
+pushed off a head, the step of the contact stress) with almost no work and says nothing of the
+loading rate."""
+
 SEEDS_WRITER = "stage place_spheres (updated by carve)"
 AGG_WRITER = "stage carve (updated by cut and mastic)"
 
@@ -243,6 +251,65 @@ def solid_volume(state):
     """Total aggregate volume (m^3) of the state's ``aggregates`` group."""
     ag = state.groups.get("aggregates")
     return float(np.sum(ag["volume"])) if ag is not None else 0.0
+
+
+def lab_case_check(cfg, case, k, scene, report, specimen=True):
+    """Case rules of a laboratory test stage (``idt``, ``dynamic_modulus``): those of a dem stage
+    (:func:`demcli.stages.dem.scene_check`); in 3D, when ``specimen``, the input's
+    ``bonded_specimen`` group (a prepare stage); in 2D a section of disks (discretize, or any
+    planar scene); in both, bonds in the input or a ``bonds`` section that creates them."""
+    from demcli.stages import dem
+    from demcli.stages.base import has_field
+
+    dem.scene_check(cfg, case, k, scene, report)
+    if scene is None:
+        return
+    if case.dimension == 3 and specimen and not has_field(scene, "bonded_specimen/radius"):
+        report("", "reads bonded_specimen/radius from the input, which no earlier stage writes (a prepare stage "
+                   "does; or run it on a 2D section, dimension: 2)")
+    if not has_field(scene, "bonds/i") and not (cfg.get("bonds") is not None and cfg.bonds.create):
+        report("bonds", "the input holds no bonds: give bonds: {create: true, models: [...]} to bond the specimen's "
+                        "touching spheres at the stage start", None)
+
+
+def planar_slab(case, x):
+    """(thickness t [m], z of the disks' plane [m]) of a 2D case with body centres ``x`` (n, 3):
+    the case's out-of-plane ``thickness`` (disks are plane-stress slices of that thickness: no
+    stress and free strain out of the plane) and the plane z = mean z of the bodies."""
+    return float(case.thickness), float(np.mean(x[:, 2])) if len(x) else 0.0
+
+
+def kinetic_to_work(kinetic, force, displacement):
+    """Quasi-static measure of a loading test per record row: (E_k / W, W).
+
+    kinetic: (n,) kinetic energy of the bodies [J]; force: (n,) the loading's force [N], in the
+    direction of ``displacement`` (n,) [m], the loaded boundary's travel since the first row.
+    W_k = sum_{l <= k} (F_l + F_{l-1}) / 2 (u_l - u_{l-1}) [J] is the work done on the specimen
+    (trapezoid over the rows). A quasi-static test turns nearly all of it into strain energy
+    and losses, so E_k / W is small; a harmonic load at f on a specimen of natural frequency
+    f_n gives E_k / W of order (f / f_n)^2. NaN where W <= 0.
+    """
+    f, u = np.asarray(force, float), np.asarray(displacement, float)
+    work = np.concatenate([[0.0], np.cumsum(0.5 * (f[1:] + f[:-1]) * np.diff(u))])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = np.where(work > 0.0, np.asarray(kinetic, float) / work, np.nan)
+    return ratio, work
+
+
+def quasi_static_warning(ctx, ratio, work, limit, advice, upto=None):
+    """Log a warning when E_k / W (``ratio``, from :func:`kinetic_to_work`) exceeds ``limit`` on a
+    row (rows ``upto`` and before, when given) whose work W has reached ``WORK_FLOOR`` of its largest
+    value. Returns the largest such ratio (NaN when no row counts)."""
+    n = len(ratio) if upto is None else upto + 1
+    w = np.asarray(work[:n], float)
+    counted = np.flatnonzero(w >= WORK_FLOOR * w.max()) if n and w.max() > 0 else np.zeros(0, np.int64)
+    if len(counted) == 0:
+        return math.nan
+    worst = float(np.max(ratio[counted]))
+    if worst > limit:
+        ctx.log(f"warning: the loading is not quasi-static: kinetic energy {worst:.3g} of the work done (above "
+                f"{limit:g}, from the row where the work reaches {WORK_FLOOR:g} of its largest); {advice}")
+    return worst
 
 
 def box_of_walls(state_or_groups):

@@ -22,6 +22,17 @@ Quasi-static check: a one-degree-of-freedom estimate of the specimen's axial nat
 f_n = sqrt(|E*| A / H_0 / (m_p + M / 3)) / (2 pi) (m_p the platen's mass, M the specimen's, both
 as integrated, mass scaling included); the response to a load at f is amplified by
 1 / (1 - (f / f_n)^2), so f / f_n above ``quasi_static_limit`` (0.1: 1 %) is logged as a warning.
+Measured beside it, per record row (``records/<stage>_series``): the bodies' kinetic energy over
+the platen's work W = A H_0 int sigma de (E_k / W, of order (f / f_n)^2 for a harmonic load),
+its largest value over each frequency's measured cycles in the result, and a warning when it
+exceeds ``kinetic_limit`` (0.01: the f / f_n = 0.1 of the first check) once W has reached 5 % of
+its largest value (:func:`demcli.stages.asphalt.common.quasi_static_warning`).
+
+2D (``dimension: 2``: the discretized section of seed 001, or any planar bonded set of disks):
+the platens are normal to y, in the plane; the specimen is the spheres' bounding box, a
+plane-stress slice of the case's ``thickness`` t (no stress out of the plane), so A = width x t,
+H_0 its height, and |E*| the slice's in-plane modulus (a plane-strain reading would be
+E / (1 - nu^2)). The 2D chain ends unbonded: ``bonds: {create: true, ...}`` bonds it here.
 """
 
 import math
@@ -33,7 +44,8 @@ from demcli.config.schema import Float, Int, List, Optional, Section, Str
 from demcli.errors import InputError
 from demcli.kernels import walls as W
 from demcli.stages import dem, loop
-from demcli.stages.asphalt.common import TEST_TIME
+from demcli.stages.asphalt.common import KINETIC_LIMIT_DOC, TEST_TIME, kinetic_to_work, lab_case_check, planar_slab
+from demcli.stages.asphalt.common import quasi_static_warning
 from demcli.stages.base import ENGINE_KEEPS, ENGINE_OUTPUT, StageType, register_stage
 from demcli.state.fields import Field, register, register_group
 from demcli.state.records import describe_column
@@ -54,7 +66,9 @@ register_group("dynamic_modulus_result", "Dynamic modulus per frequency (AASHTO 
 for _name, _unit, _doc in [("frequency", "Hz", "loading frequencies, in the order run"),
                            ("modulus", "Pa", "dynamic modulus (magnitude of E*) = stress amplitude / strain amplitude"),
                            ("phase_angle", "deg", "lag of the strain behind the stress"),
-                           ("frequency_ratio", "1", "f / f_n (quasi-static measure)")]:
+                           ("frequency_ratio", "1", "f / f_n (quasi-static measure)"),
+                           ("kinetic_to_work", "1", "largest kinetic energy / work over the measured cycles "
+                                                    "(quasi-static measure)")]:
     register(Field(f"dynamic_modulus_result/{_name}", "f", ("n_freq",), _unit, _doc, writer="stage dynamic_modulus"))
 
 
@@ -111,45 +125,53 @@ def _fields():
                            "the spheres' bounding box (a prism specimen, e.g. a lattice)"),
         "quasi_static_limit": Float(min=0, min_inclusive=False, default=0.1,
                                     doc="warn when f / f_n exceeds it (f_n: the axial natural frequency)"),
+        "kinetic_limit": Float(min=0, min_inclusive=False, default=0.01, doc=KINETIC_LIMIT_DOC),
         "time": TEST_TIME,
     })
     return f
 
 
-def specimen_geometry(cfg, groups):
-    """(section area [m^2], height H_0 [m], centre of the bottom platen (3,) [m], half-widths
-    (x, y) of the platens [m]) from the bonded_specimen group or the spheres' bounding box."""
-    x = np.asarray(groups["bodies"]["x"])
+def specimen_geometry(cfg, state, case):
+    """(section area A [m^2], height H_0 [m], centre of the bottom platen (3,) [m], half-extents
+    (3,) of the platens [m] (0 along the axis), loading axis: 2 (z) in 3D, 1 (y) in 2D) from the
+    bonded_specimen group or the spheres' bounding box. In 2D the specimen is the section's
+    bounding box, a plane-stress slice of the case's thickness t: A = width x t."""
+    groups = state.groups
+    x = state.sphere_centres()
+    r = np.asarray(groups["spheres"]["radius"])
+    lo, hi = (x - r[:, None]).min(axis=0), (x + r[:, None]).max(axis=0)
+    if case.dimension == 2:
+        t, z = planar_slab(case, x)
+        half = np.array([0.5 * (hi[0] - lo[0]), 0.0, 0.5 * t])
+        return 2 * half[0] * t, float(hi[1] - lo[1]), np.array([0.5 * (lo[0] + hi[0]), lo[1], z]), half, 1
     if cfg.section == "box":
-        r = np.asarray(groups["spheres"]["radius"])
-        lo, hi = (x - r[:, None]).min(axis=0), (x + r[:, None]).max(axis=0)
-        half = 0.5 * (hi[:2] - lo[:2])
-        return float(4 * half[0] * half[1]), float(hi[2] - lo[2]), np.r_[0.5 * (lo[:2] + hi[:2]), lo[2]], half
+        half = np.r_[0.5 * (hi[:2] - lo[:2]), 0.0]
+        return float(4 * half[0] * half[1]), float(hi[2] - lo[2]), np.r_[0.5 * (lo[:2] + hi[:2]), lo[2]], half, 2
     sp = groups.get("bonded_specimen")
     if sp is None:
         raise InputError("its input has no bonded_specimen group (written by a prepare stage): run a prepare "
                          "stage first, or give section: box for a prism specimen")
     r0, h0 = float(sp["radius"]), float(sp["height"])
     c = x[:, :2].mean(axis=0)
-    return math.pi * r0 * r0, h0, np.array([c[0], c[1], float(sp["base_z"])]), np.array([r0, r0])
+    return math.pi * r0 * r0, h0, np.array([c[0], c[1], float(sp["base_z"])]), np.array([r0, r0, 0.0]), 2
 
 
-def _walls(cfg, base, h0, half, area, mload):
-    """The two platens; the top one carries the first frequency's haversine."""
+def _walls(cfg, base, h0, half, area, mload, axis):
+    """The two platens normal to ``axis``; the top one carries the first frequency's haversine."""
     from demcli.config.schema import Node
 
     sc, sa = cfg.stress.contact, cfg.stress.amplitude
-    lo, hi = np.r_[-half, 0.0], np.r_[half, 0.0]
-    top = base + [0, 0, h0]
+    up = np.eye(3)[axis]
+    top = base + h0 * up
     motion = Node({"mode": "force", "force": (sc + 0.5 * sa) * area, "amplitude": 0.5 * sa * area,
                    "frequency": cfg.frequencies[0], "phase": -0.5 * math.pi, "start": 0.0, "mass": mload,
                    "weight": False})
-    return [Node({"type": "plane", "name": "bottom", "point": tuple(base), "normal": (0.0, 0.0, 1.0),
+    return [Node({"type": "plane", "name": "bottom", "point": tuple(base), "normal": tuple(up),
                   "material": cfg.platen_material, "motion": None, "lay_on_particles": None,
-                  "extent": tuple(np.r_[base + lo, base + hi])}),
-            Node({"type": "plane", "name": "top", "point": tuple(top), "normal": (0.0, 0.0, -1.0),
+                  "extent": tuple(np.r_[base - half, base + half])}),
+            Node({"type": "plane", "name": "top", "point": tuple(top), "normal": tuple(-up),
                   "material": cfg.platen_material, "lay_on_particles": None, "motion": motion,
-                  "extent": tuple(np.r_[top + lo, top + hi])})]
+                  "extent": tuple(np.r_[top - half, top + half])})]
 
 
 class _Loading:
@@ -188,8 +210,9 @@ class _Loading:
         return t0 + cond / self.f[k], t0 + self.n / self.f[k]
 
 
-def _results(cfg, load, rows, area, h0, m_eff):
-    """Per-frequency rows: |E*|, phase angle, fit residual, f / f_n, steps, wall time."""
+def _results(cfg, load, rows, area, h0, m_eff, ratio):
+    """Per-frequency rows: |E*|, phase angle, fit residual, f / f_n, the largest kinetic energy /
+    work (``ratio`` per record row) over the measured cycles, steps, wall time."""
     out = []
     t = np.asarray(rows["time"])
     for k, f in enumerate(load.f):
@@ -201,7 +224,8 @@ def _results(cfg, load, rows, area, h0, m_eff):
         c0, s0 = load.clock.get(k, (math.nan, 0))  # (a resumed run: the time since it resumed)
         c1, s1 = load.clock.get(k + 1, load.clock["end"])
         out.append({"frequency": f, "modulus": mod, "phase_angle": phase, "fit_residual": res,
-                    "frequency_ratio": f / fn, "steps": int(load.first[k + 1] - load.first[k]) * load.rec_every,
+                    "frequency_ratio": f / fn, "kinetic_to_work": float(np.nanmax(ratio[sel], initial=0.0)),
+                    "steps": int(load.first[k + 1] - load.first[k]) * load.rec_every,
                     "wall_time": c1 - c0, "steps_timed": s1 - s0})
     return out
 
@@ -212,14 +236,14 @@ def run_dynamic_modulus(ctx, cfg, state_in):
     from demcli.state import RecordTable
 
     try:
-        area, h0, base, half = specimen_geometry(cfg, state_in.groups)
+        area, h0, base, half, axis = specimen_geometry(cfg, state_in, ctx.case)
     except InputError as e:
         raise InputError(f"stage {ctx.name}: {e}") from None
     mspec = float(np.sum(state_in.groups["bodies"]["mass"])) * cfg.scaling.mass
     mload = cfg.load_mass if cfg.load_mass is not None else 0.01 * mspec
     load = _Loading(cfg)
     dcfg = dict(cfg)
-    dcfg["walls"] = _walls(cfg, base, h0, half, area, mload)
+    dcfg["walls"] = _walls(cfg, base, h0, half, area, mload, axis)
     dcfg["stop"] = None
     dcfg["time"] = Node({"duration": None, "steps": 1, "dt": cfg.time.dt, "dt_factor": cfg.time.dt_factor})
     cols = {"stress": "Pa", "strain": "1", "frequency": "Hz"}
@@ -227,28 +251,32 @@ def run_dynamic_modulus(ctx, cfg, state_in):
 
     def row(system):
         k = load.apply(system)
-        h = float(system.wpoint[1, 2] - system.wpoint[0, 2])
+        h = float(system.wpoint[1, axis] - system.wpoint[0, axis])
         return {"stress": float(-system.wforce[1] @ system.walls.normal[1]) / area, "strain": 1.0 - h / h0,
                 "frequency": float(load.f[k])}
 
     def finish(ctx_, system, state, table):
         load.clock["end"] = (_time.perf_counter(), system.step)
         rows = {k: np.asarray(v) for k, v in table.to_arrays().items()}
-        series = RecordTable("series", {"time": "s", "stress": "Pa", "strain": "1"})
+        ratio, work = kinetic_to_work(rows["kinetic"], rows["stress"] * area, rows["strain"] * h0)
+        series = RecordTable("series", {"time": "s", "stress": "Pa", "strain": "1", "kinetic_to_work": "1"})
         for k in range(len(rows["time"])):
-            series.append({n: rows[n][k] for n in ("time", "stress", "strain")})
+            series.append({"kinetic_to_work": ratio[k], **{n: rows[n][k] for n in ("time", "stress", "strain")}})
         ctx_.write_records(series, x="time", ys=["strain"])
-        res = _results(cfg, load, rows, area, h0, mload + mspec / 3.0)
+        res = _results(cfg, load, rows, area, h0, mload + mspec / 3.0, ratio)
         t = RecordTable("dynamic_modulus", {"frequency": "Hz", "modulus": "Pa", "phase_angle": "deg",
-                                            "fit_residual": "1", "frequency_ratio": "1", "steps": "1",
-                                            "wall_time": "s"})
+                                            "fit_residual": "1", "frequency_ratio": "1", "kinetic_to_work": "1",
+                                            "steps": "1", "wall_time": "s"})
         _report(ctx_, cfg, res, n_s)
+        quasi_static_warning(ctx_, ratio, work, cfg.kinetic_limit, "lighten the platen or the mass scaling, or "
+                             "lower the frequencies")
         for r in res:
             t.append(r)
         t.to_state(state)
         ctx_.write_records(t, x="frequency", ys=["modulus", "phase_angle"], logx=True)
         state.groups["dynamic_modulus_result"] = {n: np.array([r[n] for r in res], float) for n in
-                                                  ("frequency", "modulus", "phase_angle", "frequency_ratio")}
+                                                  ("frequency", "modulus", "phase_angle", "frequency_ratio",
+                                                   "kinetic_to_work")}
         for grp in ("bonded_specimen",):
             if grp in state_in.groups:
                 state.groups[grp] = dict(state_in.groups[grp])
@@ -275,5 +303,6 @@ def _report(ctx, cfg, res, n_s):
 register_stage(StageType(
     "dynamic_modulus", _fields(), run_dynamic_modulus, needs_input=True,
     provides=ENGINE_OUTPUT + ("dynamic_modulus_result/*",), keeps=ENGINE_KEEPS + ("bonded_specimen",),
-    case_check=dem.scene_check,
+    case_check=lambda cfg, case, k, scene, report: lab_case_check(cfg, case, k, scene, report,
+                                                                  specimen=cfg.section == "specimen"),
     doc="AASHTO T 342 style dynamic modulus: haversine stress at several frequencies, |E*| and phase angle"))
