@@ -95,11 +95,12 @@ def load_stage_types():
     from demcli.stages.asphalt import carve, compact, cut, mastic, place  # 3D asphalt, seed 000
     from demcli.stages.asphalt import discretize, polygons  # 2D sections, seed 001
     from demcli.stages.asphalt import sand  # bonded viscoelastic specimens, seed 003
-    from demcli.stages.asphalt import dynamic_modulus, idt  # the virtual asphalt lab's tests
+    from demcli.stages.asphalt import dynamic_modulus, idt, marshall  # the virtual asphalt lab's tests
     from demcli.stages.ballast import assemble, box, clumps, library  # railway ballast, seed 002
     from demcli.stages.specimen import generate, gradation, particles
 
-    del dem, carve, compact, cut, mastic, place, discretize, polygons, sand, dynamic_modulus, idt  # registrations
+    del dem, carve, compact, cut, mastic, place, discretize, polygons, sand  # registrations
+    del dynamic_modulus, idt, marshall
     del assemble, box, clumps, library, generate, gradation, particles
     return STAGE_TYPES
 

@@ -1,0 +1,127 @@
+"""Marshall stability and flow (``marshall``, issue #32 item 3): the smoke case end to end, the
+breaking heads' placement against the specimen, and bad input."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+from click.testing import CliRunner
+
+from demcli import run_case
+from demcli.cli import cli
+from demcli.compare import read_record
+from demcli.state import read_state
+
+ROOT = Path(__file__).resolve().parents[2]
+SMOKE = ROOT / "cases" / "smoke" / "marshall_stability.yaml"
+HEAD = ROOT / "cases" / "meshes" / "marshall_head.stl"
+D, T = 20e-3, 4e-3
+
+
+@pytest.fixture(scope="module")
+def broken(tmp_path_factory):
+    out = tmp_path_factory.mktemp("marshall") / "run"
+    run_case(SMOKE, out=out, quiet=True)
+    return out
+
+
+def test_the_load_rises_to_a_peak_and_falls(broken):
+    rows = read_record(broken / "records" / "break_marshall.csv")[0]
+    p, d = np.asarray(rows["load"]), np.asarray(rows["deformation"])
+    res = read_state(broken / "01-break.h5")
+    k = int(np.argmax(p))
+    # Then the curve rises from the first touch to a peak inside the record and falls after it
+    assert 0 < k < len(p) - 1 and p[k] > 0 and p[-1] < 0.5 * p[k] and np.all(np.diff(d) > 0)
+    # and the stability is the peak load, the flow the deformation there (also in 0.25 mm units)
+    assert float(res["marshall_result/stability"]) == p[k] > 0
+    assert float(res["marshall_result/flow"]) == d[k] > 0
+    assert float(res["marshall_result/flow_value"]) == pytest.approx(d[k] / 0.25e-3, rel=1e-12)
+    assert float(res["marshall_result/diameter"]) == D and float(res["marshall_result/thickness"]) == T
+    assert float(res["marshall_result/head_scale"]) == pytest.approx(0.5 * D / 50.8, rel=1e-6)
+    # and the loading was quasi-static up to the peak
+    assert float(res["marshall_result/kinetic_to_work"]) < 1e-2
+    assert "kinetic_to_work" in rows and "broken_tension" in rows
+    assert (broken / "records" / "break_marshall.png").stat().st_size > 0
+
+
+def _ring():
+    """Spheres of radius 0.5 mm on a hexagonal-ish disk of radius 10 mm (the specimen seen along z)."""
+    rng = np.random.default_rng(3)
+    n = 400
+    r = 9.5e-3 * np.sqrt(rng.random(n))
+    a = 2 * np.pi * rng.random(n)
+    x = np.c_[r * np.cos(a), r * np.sin(a), 1e-3 + 2e-3 * rng.random(n)]
+    return x, np.full(n, 0.5e-3)
+
+
+def test_heads_touch_the_outermost_spheres_concave_side_in():
+    from demcli.config.schema import Node
+    from demcli.geometry.mesh_file import read_mesh
+    from demcli.stages.asphalt.marshall import _gap, _profile, place_heads
+
+    x, rad = _ring()
+    cfg = Node({"speed": 0.01, "head_material": "steel"})
+    base = np.array([0.0, 0.0, 0.0])
+    walls, s, sep0 = place_heads(cfg, x, rad, D, T, base, HEAD, None, "stages[1]")
+    assert s == pytest.approx(0.5 * D / 50.8, rel=1e-6)   # the file's 50.8 mm arc (float32) to D/2
+    firsts = []
+    for w, side in zip(walls, (-1.0, 1.0)):
+        verts, tris = read_mesh(w.file, scale=w.scale, translation=w.translation, rotate=np.degrees(w.rotate))
+        firsts.append(verts[0])
+        axis = np.asarray(w.translation)
+        # Then the head is an arc of radius D/2 about an axis along z (parallel to the specimen's axis) ...
+        assert np.allclose(np.hypot(verts[:, 0] - axis[0], verts[:, 1] - axis[1]), 0.5 * D, rtol=1e-6)
+        assert np.ptp(verts[:, 2]) == pytest.approx(76.2 * s, rel=1e-6)
+        # on the specimen's side `side` of it, its triangles' normals facing the axis (concave side in)
+        assert np.all(side * (verts[:, 0] - axis[0]) > 0)
+        e = np.cross(verts[tris[:, 1]] - verts[tris[:, 0]], verts[tris[:, 2]] - verts[tris[:, 0]])
+        mid = verts[tris].mean(axis=1)
+        assert np.all(np.einsum("ij,ij->i", e, axis - mid) > 0)
+        # and it touches the outermost spheres: the smallest gap to its faces is zero (to 1e-9 D) ...
+        assert abs(_gap(_profile(verts, axis[:2]), x[:, :2], rad)) < 1e-9 * D
+        # ... and, against the circle of radius D/2 the faces are chords of (16 over 80 degrees: they lie
+        # up to R (1 - cos 2.5 deg) = 9.5 um inside it), the spheres facing the arc clear it by 0 .. 9.5 um
+        rel = x[:, :2] - axis[:2]
+        facing = side * rel[:, 0] > np.cos(np.radians(40)) * np.hypot(rel[:, 0], rel[:, 1])
+        clear = 0.5 * D - np.hypot(rel[facing, 0], rel[facing, 1]) - rad[facing]
+        assert 0 <= clear.min() <= 0.5 * D * (1 - np.cos(np.radians(2.5))) + 1e-12
+    assert sep0 == firsts[1][0] - firsts[0][0]
+    assert walls[0].motion is None and walls[1].motion.velocity == (-0.01, 0.0, 0.0)
+    assert walls[0].normal == (1.0, 0.0, 0.0) and walls[1].normal == (-1.0, 0.0, 0.0)
+
+
+def test_bad_speed_is_a_config_error(tmp_path):
+    case = yaml.safe_load(SMOKE.read_text())
+    case["stages"][1]["speed"] = "0 mm/s"
+    path = tmp_path / "still.yaml"
+    path.write_text(yaml.safe_dump(case, sort_keys=False))
+    result = CliRunner().invoke(cli, ["check", str(path)])
+    # Then the error names the file, the key, the rule and the value (exit code 2)
+    assert result.exit_code == 2 and "still.yaml" in result.output and "stages[1].speed: must be > 0" in result.output
+    assert "0 mm/s" in result.output and "Traceback" not in result.output
+
+
+def test_no_bonded_specimen_is_an_input_error(tmp_path):
+    from demcli.errors import InputError
+
+    case = yaml.safe_load(SMOKE.read_text())
+    case["stages"][0] = {"name": "prepare", "type": "generate", "region": {"shape": "box", "min": [0, 0, 0],
+                                                                           "max": ["20 mm", "20 mm", "4 mm"]},
+                         "count": 20, "radius": "1 mm", "material": "sand"}
+    case["stages"][1]["bonds"] = {"create": True, "models": case.pop("bond_models", [
+        {"model": "contact_bond", "materials": ["sand", "sand"], "kn": "3e5 N/m", "ks": "1.5e5 N/m"}])}
+    case["stages"][1]["head_file"] = str(HEAD)
+    path = tmp_path / "loose.yaml"
+    path.write_text(yaml.safe_dump(case, sort_keys=False))
+    result = CliRunner().invoke(cli, ["check", str(path)])
+    assert result.exit_code == 2 and "bonded_specimen" in result.output
+    from demcli.stages.asphalt.diametral import specimen
+
+    class Ctx:
+        name = "break"
+
+        class case:
+            dimension = 3
+    with pytest.raises(InputError, match="bonded_specimen"):
+        specimen(Ctx, {}, np.zeros((3, 3)))
