@@ -21,6 +21,22 @@ from demcli.errors import InputError
 from demcli.stages import dem, loop
 from demcli.stages.asphalt.common import KINETIC_LIMIT_DOC, TEST_TIME, kinetic_to_work, planar_slab
 from demcli.stages.asphalt.common import quasi_static_warning
+from demcli.state.fields import Field, register, register_group
+from demcli.state.records import describe_column
+
+describe_column("kinetic_to_work", "Kinetic energy / work", "1", table=None,
+                doc="kinetic energy of the bodies over the loading's work until then (quasi-static below 0.01)")
+
+
+def declare_outputs(table, title, fields):
+    """Declare the record ``table``'s deformation and load columns and the result group
+    ``<table>_result`` of scalar ``fields`` [(name, unit, doc)], written by the stage ``table``."""
+    describe_column("deformation", "Deformation", "m", "mm", 1e3, table=table, doc="approach of the two heads")
+    describe_column("load", "Load", "N", "kN", 1e-3, table=table, doc="force on the moving head, compression positive")
+    writer = f"stage {table}"
+    register_group(f"{table}_result", title, writer=writer)
+    for name, unit, doc in fields:
+        register(Field(f"{table}_result/{name}", "f", (), unit, doc, writer=writer))
 
 
 def loading_fields(speed_doc):

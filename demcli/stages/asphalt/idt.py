@@ -39,25 +39,17 @@ import math
 import numpy as np
 
 from demcli.stages.asphalt.common import lab_case_check
-from demcli.stages.asphalt.diametral import loading_fields, run_loading, specimen
+from demcli.stages.asphalt.diametral import declare_outputs, loading_fields, run_loading, specimen
 from demcli.stages.base import ENGINE_KEEPS, ENGINE_OUTPUT, StageType, register_stage
-from demcli.state.fields import Field, register, register_group
 from demcli.state.records import describe_column
 
-describe_column("deformation", "Deformation", "m", "mm", 1e3, table="idt", doc="approach of the two heads")
-describe_column("load", "Load", "N", "kN", 1e-3, table="idt", doc="force on the moving head, compression positive")
-describe_column("kinetic_to_work", "Kinetic energy / work", "1", table=None,
-                doc="kinetic energy of the bodies over the loading's work until then (quasi-static below 0.01)")
 describe_column("tensile_stress", "Nominal tensile stress", "Pa", "MPa", 1e-6, table="idt",
                 doc="2 P / (pi t D): the elastic tension across the loaded diameter")
-
-register_group("idt_result", "Indirect tension test result", writer="stage idt")
-for _name, _unit, _doc in [("peak_load", "N", "largest load P_max"),
-                           ("its", "Pa", "indirect tensile strength 2 P_max / (pi t D)"),
-                           ("deformation_at_peak", "m", "heads' approach at the peak load"),
-                           ("diameter", "m", "specimen diameter D"), ("thickness", "m", "specimen thickness t"),
-                           ("kinetic_to_work", "1", "kinetic energy at the peak / the head's work until then")]:
-    register(Field(f"idt_result/{_name}", "f", (), _unit, _doc, writer="stage idt"))
+declare_outputs("idt", "Indirect tension test result", [
+    ("peak_load", "N", "largest load P_max"), ("its", "Pa", "indirect tensile strength 2 P_max / (pi t D)"),
+    ("deformation_at_peak", "m", "heads' approach at the peak load"), ("diameter", "m", "specimen diameter D"),
+    ("thickness", "m", "specimen thickness t"),
+    ("kinetic_to_work", "1", "kinetic energy at the peak / the head's work until then")])
 
 
 def nominal_stress(load, thickness, diameter):

@@ -31,10 +31,8 @@ import numpy as np
 
 from demcli.config.schema import Str
 from demcli.stages.asphalt.common import lab_case_check
-from demcli.stages.asphalt.diametral import loading_fields, run_loading, specimen
+from demcli.stages.asphalt.diametral import declare_outputs, loading_fields, run_loading, specimen
 from demcli.stages.base import ENGINE_KEEPS, ENGINE_OUTPUT, StageType, register_stage
-from demcli.state.fields import Field, register, register_group
-from demcli.state.records import describe_column
 
 FLOW_UNIT = 0.25e-3
 """ASTM D6927 reports the flow in units of 0.25 mm [m]."""
@@ -43,18 +41,13 @@ ROTATE_DEG = {"fixed": (90.0, 0.0, 90.0), "head": (90.0, 0.0, -90.0)}
 """Rotations (about x, then y, then z, degrees) of the head file: file y -> world z (the specimen's
 axis) and file -z (the arc's side) -> world -x for the fixed head, +x for the moving one."""
 
-describe_column("deformation", "Deformation", "m", "mm", 1e3, table="marshall", doc="approach of the two heads")
-describe_column("load", "Load", "N", "kN", 1e-3, table="marshall",
-                doc="force on the moving head, compression positive")
-
-register_group("marshall_result", "Marshall stability and flow", writer="stage marshall")
-for _name, _unit, _doc in [("stability", "N", "Marshall stability: the peak load P_max"),
-                           ("flow", "m", "Marshall flow: the heads' approach at the peak load"),
-                           ("flow_value", "1", "the flow in units of 0.25 mm (ASTM D6927's flow value)"),
-                           ("diameter", "m", "specimen diameter D"), ("thickness", "m", "specimen thickness t"),
-                           ("head_scale", "1", "scale of the head file (its arc radius to D/2)"),
-                           ("kinetic_to_work", "1", "kinetic energy at the peak / the head's work until then")]:
-    register(Field(f"marshall_result/{_name}", "f", (), _unit, _doc, writer="stage marshall"))
+declare_outputs("marshall", "Marshall stability and flow", [
+    ("stability", "N", "Marshall stability: the peak load P_max"),
+    ("flow", "m", "Marshall flow: the heads' approach at the peak load"),
+    ("flow_value", "1", "the flow in units of 0.25 mm (ASTM D6927's flow value)"),
+    ("diameter", "m", "specimen diameter D"), ("thickness", "m", "specimen thickness t"),
+    ("head_scale", "1", "scale of the head file (its arc radius to D/2)"),
+    ("kinetic_to_work", "1", "kinetic energy at the peak / the head's work until then")])
 
 
 def _fields():
