@@ -140,13 +140,17 @@ def case_schema():
 def load_case(path, overrides=()):
     """Validated case (a read-only Node, SI values) or ConfigError listing every problem: a case
     file of the built-in stage types (:func:`demcli.config.case.load_case`); its mesh walls' files
-    are read (a bad one: a ConfigError naming it, :func:`demcli.stages.dem.check_mesh_files`)."""
+    are read (a bad one: a ConfigError naming it, :func:`demcli.stages.dem.check_mesh_files`), and
+    the marshall stages' head files (:func:`demcli.stages.asphalt.marshall.head_radius`)."""
     from demcli.config.case import load_case as load_with
+    from demcli.stages.asphalt.marshall import head_radius
     from demcli.stages.dem import check_mesh_files
 
     case = load_with(path, stage_catalog(), overrides)
     for k, cfg in enumerate(case.stages):  # the files a config names, before any stage runs
         check_mesh_files(cfg, path, f"stages[{k}].walls")
+        if cfg.type == "marshall":
+            head_radius(cfg.head_file, path, f"stages[{k}]")
     return case
 
 

@@ -102,6 +102,30 @@ def test_bad_speed_is_a_config_error(tmp_path):
     assert "0 mm/s" in result.output and "Traceback" not in result.output
 
 
+@pytest.mark.parametrize("head, rule", [("nowhere.stl", "file not found"),
+                                        (str(ROOT / "cases" / "meshes" / "make_marshall_head.py"), "must be a")])
+def test_bad_head_file_is_a_config_error(tmp_path, head, rule):
+    case = yaml.safe_load(SMOKE.read_text())
+    case["stages"][1]["head_file"] = head
+    path = tmp_path / "headless.yaml"
+    path.write_text(yaml.safe_dump(case, sort_keys=False))
+    result = CliRunner().invoke(cli, ["check", str(path)])
+    assert result.exit_code == 2 and "headless.yaml" in result.output and "stages[1].head_file" in result.output
+    assert rule in result.output and "Traceback" not in result.output
+
+
+def test_a_head_that_is_no_arc_is_a_config_error(tmp_path):
+    import meshio
+
+    meshio.write(tmp_path / "flat.stl", meshio.Mesh(np.array([[0.0, 0, -1], [1, 0, -1], [0, 1, -1]]),
+                                                    [("triangle", np.array([[0, 1, 2]]))]), binary=True)
+    from demcli.errors import ConfigError
+    from demcli.stages.asphalt.marshall import head_radius
+
+    with pytest.raises(ConfigError, match="must be an arc about the file's y axis"):
+        head_radius(tmp_path / "flat.stl", tmp_path / "case.yaml", "stages[1]")
+
+
 def test_no_bonded_specimen_is_an_input_error(tmp_path):
     from demcli.errors import InputError
 

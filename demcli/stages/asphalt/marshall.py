@@ -91,11 +91,11 @@ def _touching(profile, centres, radii, direction, tol):
     return travel
 
 
-def place_heads(cfg, x, rad, D, t, base, head_file, case_file, where):
-    """The fixed and the moving head (mesh wall nodes) touching the outermost spheres (centres x
-    (n, 3), radii rad [m]) of the specimen (D, t, base as :func:`specimen` gives them), and
-    (s, x_1 - x_0 of their first vertices [m])."""
-    from demcli.config.schema import ConfigIssue, Node
+def head_radius(head_file, case_file, where):
+    """R_file: the arc radius of the head file (its vertices' distance from the file's y axis, in
+    its units); a missing or unreadable file, or one that is not such an arc, is a ConfigError
+    naming ``case_file`` and ``where``.head_file (exit code 2)."""
+    from demcli.config.schema import ConfigIssue
     from demcli.errors import ConfigError
     from demcli.geometry.mesh_file import read_mesh
 
@@ -105,7 +105,17 @@ def place_heads(cfg, x, rad, D, t, base, head_file, case_file, where):
         rule = "must be an arc about the file's y axis (its vertices at one distance from it)"
         raise ConfigError([ConfigIssue(case_file, None, f"{where}.head_file", rule,
                                        f"distances {rho.min():g} .. {rho.max():g}")])
-    s = 0.5 * D / float(rho.mean())
+    return float(rho.mean())
+
+
+def place_heads(cfg, x, rad, D, t, base, head_file, case_file, where):
+    """The fixed and the moving head (mesh wall nodes) touching the outermost spheres (centres x
+    (n, 3), radii rad [m]) of the specimen (D, t, base as :func:`specimen` gives them), and
+    (s, x_1 - x_0 of their first vertices [m])."""
+    from demcli.config.schema import Node
+    from demcli.geometry.mesh_file import read_mesh
+
+    s = 0.5 * D / head_radius(head_file, case_file, where)
     nodes, first = [], []
     for name, sign in (("fixed", 1.0), ("head", -1.0)):
         centre = np.array([base[0] - sign * 0.5 * D, base[1], base[2] + 0.5 * t])   # the arc's axis, half a D off
