@@ -45,6 +45,19 @@ def test_the_load_rises_to_a_peak_and_falls(broken):
     assert (broken / "records" / "break_marshall.png").stat().st_size > 0
 
 
+def test_halving_the_speed_leaves_the_stability(broken, tmp_path):
+    import shutil
+
+    # Given the same prepared specimen broken at 5 mm/s instead of 10 mm/s
+    shutil.copy(broken / "00-prepare.h5", tmp_path / "00-prepare.h5")
+    run_case(SMOKE, out=tmp_path, overrides=["stages.break.speed=5 mm/s"], quiet=True)
+    # Then stability and flow stay within 1 % (measured: 41.51 N and 41.52 N, flow 0.270 mm both)
+    res = [read_state(f / "01-break.h5") for f in (broken, tmp_path)]
+    for key in ("stability", "flow"):
+        assert float(res[1][f"marshall_result/{key}"]) == pytest.approx(float(res[0][f"marshall_result/{key}"]),
+                                                                        rel=0.01)
+
+
 def _ring():
     """Spheres of radius 0.5 mm on a hexagonal-ish disk of radius 10 mm (the specimen seen along z)."""
     rng = np.random.default_rng(3)
@@ -149,3 +162,15 @@ def test_no_bonded_specimen_is_an_input_error(tmp_path):
             dimension = 3
     with pytest.raises(InputError, match="bonded_specimen"):
         specimen(Ctx, {}, np.zeros((3, 3)))
+
+
+def test_a_specimen_longer_than_the_heads_is_an_input_error():
+    from demcli.config.schema import Node
+    from demcli.errors import InputError
+    from demcli.stages.asphalt.marshall import place_heads
+
+    # Given a 20 mm disk 16 mm thick: the heads scaled to it are 76.2 / 101.6 x 20 = 15 mm long
+    x, rad = _ring()
+    with pytest.raises(InputError, match="longer than the scaled breaking heads"):
+        place_heads(Node({"speed": 0.01, "head_material": "steel"}), x, rad, D, 16e-3, np.zeros(3), HEAD, None,
+                    "stages[1]")

@@ -30,6 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from demcli.config.schema import Str
+from demcli.errors import InputError
 from demcli.stages.asphalt.common import lab_case_check
 from demcli.stages.asphalt.diametral import declare_outputs, loading_fields, run_loading, specimen
 from demcli.stages.base import ENGINE_KEEPS, ENGINE_OUTPUT, StageType, register_stage
@@ -121,6 +122,9 @@ def place_heads(cfg, x, rad, D, t, base, head_file, case_file, where):
         centre = np.array([base[0] - sign * 0.5 * D, base[1], base[2] + 0.5 * t])   # the arc's axis, half a D off
         rot = np.radians(ROTATE_DEG[name])
         verts, _ = read_mesh(head_file, case_file=case_file, scale=s, translation=centre, rotate=np.degrees(rot))
+        if np.ptp(verts[:, 2]) < t:  # the placement sees the head as a prism along z over the whole specimen
+            raise InputError(f"{where}: the specimen ({t * 1e3:.4g} mm thick) is longer than the scaled breaking "
+                             f"heads ({np.ptp(verts[:, 2]) * 1e3:.4g} mm): ASTM D6927 heads cover the specimen")
         centre[0] += sign * _touching(_profile(verts, centre[:2]), x[:, :2], rad, sign, 1e-9 * D)
         motion = None if sign > 0 else Node({"mode": "velocity", "velocity": (-cfg.speed, 0.0, 0.0)})
         nodes.append(Node({"type": "mesh", "name": name, "file": str(head_file), "scale": s, "rotate": tuple(rot),
