@@ -58,47 +58,51 @@ def test_halving_the_speed_leaves_the_stability(broken, tmp_path):
                                                                         rel=0.01)
 
 
-def _ring():
-    """Spheres of radius 0.5 mm on a hexagonal-ish disk of radius 10 mm (the specimen seen along z)."""
+def _ring(d=D):
+    """400 spheres of radius d / 40 at random in a disk of radius 0.475 d, 0.05 d .. 0.15 d above z = 0
+    (the specimen seen along z)."""
     rng = np.random.default_rng(3)
     n = 400
-    r = 9.5e-3 * np.sqrt(rng.random(n))
+    r = 0.475 * d * np.sqrt(rng.random(n))
     a = 2 * np.pi * rng.random(n)
-    x = np.c_[r * np.cos(a), r * np.sin(a), 1e-3 + 2e-3 * rng.random(n)]
-    return x, np.full(n, 0.5e-3)
+    x = np.c_[r * np.cos(a), r * np.sin(a), d * (0.05 + 0.1 * rng.random(n))]
+    return x, np.full(n, d / 40)
 
 
-def test_heads_touch_the_outermost_spheres_concave_side_in():
+@pytest.mark.parametrize("d, scale", [(20e-3, 20 / 101.6 * 1e-3), (101.6e-3, 1e-3)])
+def test_heads_touch_the_outermost_spheres_concave_side_in(d, scale):
     from demcli.config.schema import Node
     from demcli.geometry.mesh_file import read_mesh
     from demcli.stages.asphalt.marshall import _gap, _profile, place_heads
 
-    x, rad = _ring()
+    # Given a specimen of spheres of diameter d (20 mm: the smoke case's; 101.6 mm: ASTM D6927's), 0.2 d thick
+    x, rad = _ring(d)
     cfg = Node({"speed": 0.01, "head_material": "steel"})
     base = np.array([0.0, 0.0, 0.0])
-    walls, s, sep0 = place_heads(cfg, x, rad, D, T, base, HEAD, None, "stages[1]")
-    assert s == pytest.approx(0.5 * D / 50.8, rel=1e-6)   # the file's 50.8 mm arc (float32) to D/2
+    walls, s, sep0 = place_heads(cfg, x, rad, d, 0.2 * d, base, HEAD, None, "stages[1]")
+    # Then the head file (mm) is scaled to the specimen: 0.001 (mm -> m) for the standard's specimen
+    assert s == pytest.approx(scale, rel=1e-6)   # (the file's 50.8 mm arc is float32)
     firsts = []
     for w, side in zip(walls, (-1.0, 1.0)):
         verts, tris = read_mesh(w.file, scale=w.scale, translation=w.translation, rotate=np.degrees(w.rotate))
         firsts.append(verts[0])
         axis = np.asarray(w.translation)
-        # Then the head is an arc of radius D/2 about an axis along z (parallel to the specimen's axis) ...
-        assert np.allclose(np.hypot(verts[:, 0] - axis[0], verts[:, 1] - axis[1]), 0.5 * D, rtol=1e-6)
+        # Then the head is an arc of radius d/2 about an axis along z (parallel to the specimen's axis) ...
+        assert np.allclose(np.hypot(verts[:, 0] - axis[0], verts[:, 1] - axis[1]), 0.5 * d, rtol=1e-6)
         assert np.ptp(verts[:, 2]) == pytest.approx(76.2 * s, rel=1e-6)
         # on the specimen's side `side` of it, its triangles' normals facing the axis (concave side in)
         assert np.all(side * (verts[:, 0] - axis[0]) > 0)
         e = np.cross(verts[tris[:, 1]] - verts[tris[:, 0]], verts[tris[:, 2]] - verts[tris[:, 0]])
         mid = verts[tris].mean(axis=1)
         assert np.all(np.einsum("ij,ij->i", e, axis - mid) > 0)
-        # and it touches the outermost spheres: the smallest gap to its faces is zero (to 1e-9 D) ...
-        assert abs(_gap(_profile(verts, axis[:2]), x[:, :2], rad)) < 1e-9 * D
-        # ... and, against the circle of radius D/2 the faces are chords of (16 over 80 degrees: they lie
-        # up to R (1 - cos 2.5 deg) = 9.5 um inside it), the spheres facing the arc clear it by 0 .. 9.5 um
+        # and it touches the outermost spheres: the smallest gap to its faces is zero (to 1e-9 d) ...
+        assert abs(_gap(_profile(verts, axis[:2]), x[:, :2], rad)) < 1e-9 * d
+        # ... and, against the circle of radius R = d/2 the faces are chords of (16 over 80 degrees: they
+        # lie up to R (1 - cos 2.5 deg) = 9.5e-4 R inside it), the spheres facing the arc clear it by 0 .. that
         rel = x[:, :2] - axis[:2]
         facing = side * rel[:, 0] > np.cos(np.radians(40)) * np.hypot(rel[:, 0], rel[:, 1])
-        clear = 0.5 * D - np.hypot(rel[facing, 0], rel[facing, 1]) - rad[facing]
-        assert 0 <= clear.min() <= 0.5 * D * (1 - np.cos(np.radians(2.5))) + 1e-12
+        clear = 0.5 * d - np.hypot(rel[facing, 0], rel[facing, 1]) - rad[facing]
+        assert 0 <= clear.min() <= 0.5 * d * (1 - np.cos(np.radians(2.5))) + 1e-12
     assert sep0 == firsts[1][0] - firsts[0][0]
     assert walls[0].motion is None and walls[1].motion.velocity == (-0.01, 0.0, 0.0)
     assert walls[0].normal == (1.0, 0.0, 0.0) and walls[1].normal == (-1.0, 0.0, 0.0)
@@ -170,7 +174,7 @@ def test_a_specimen_longer_than_the_heads_is_an_input_error():
     from demcli.stages.asphalt.marshall import place_heads
 
     # Given a 20 mm disk 16 mm thick: the heads scaled to it are 76.2 / 101.6 x 20 = 15 mm long
-    x, rad = _ring()
+    x, rad = _ring(D)
     with pytest.raises(InputError, match="longer than the scaled breaking heads"):
         place_heads(Node({"speed": 0.01, "head_material": "steel"}), x, rad, D, 16e-3, np.zeros(3), HEAD, None,
                     "stages[1]")
