@@ -95,11 +95,12 @@ def load_stage_types():
     from demcli.stages.asphalt import carve, compact, cut, mastic, place  # 3D asphalt, seed 000
     from demcli.stages.asphalt import discretize, polygons  # 2D sections, seed 001
     from demcli.stages.asphalt import sand  # bonded viscoelastic specimens, seed 003
-    from demcli.stages.asphalt import dynamic_modulus, idt  # the virtual asphalt lab's tests
+    from demcli.stages.asphalt import dynamic_modulus, idt, marshall  # the virtual asphalt lab's tests
     from demcli.stages.ballast import assemble, box, clumps, library  # railway ballast, seed 002
     from demcli.stages.specimen import generate, gradation, particles
 
-    del dem, carve, compact, cut, mastic, place, discretize, polygons, sand, dynamic_modulus, idt  # registrations
+    del dem, carve, compact, cut, mastic, place, discretize, polygons, sand  # registrations
+    del dynamic_modulus, idt, marshall
     del assemble, box, clumps, library, generate, gradation, particles
     return STAGE_TYPES
 
@@ -139,13 +140,17 @@ def case_schema():
 def load_case(path, overrides=()):
     """Validated case (a read-only Node, SI values) or ConfigError listing every problem: a case
     file of the built-in stage types (:func:`demcli.config.case.load_case`); its mesh walls' files
-    are read (a bad one: a ConfigError naming it, :func:`demcli.stages.dem.check_mesh_files`)."""
+    are read (a bad one: a ConfigError naming it, :func:`demcli.stages.dem.check_mesh_files`), and
+    the marshall stages' head files (:func:`demcli.stages.asphalt.marshall.head_radius`)."""
     from demcli.config.case import load_case as load_with
+    from demcli.stages.asphalt.marshall import head_radius
     from demcli.stages.dem import check_mesh_files
 
     case = load_with(path, stage_catalog(), overrides)
     for k, cfg in enumerate(case.stages):  # the files a config names, before any stage runs
         check_mesh_files(cfg, path, f"stages[{k}].walls")
+        if cfg.type == "marshall":
+            head_radius(cfg.head_file, path, f"stages[{k}]")
     return case
 
 

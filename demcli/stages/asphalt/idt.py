@@ -38,43 +38,18 @@ import math
 
 import numpy as np
 
-from demcli.config.schema import Float, Str
-from demcli.errors import InputError
-from demcli.stages import dem, loop
-from demcli.stages.asphalt.common import KINETIC_LIMIT_DOC, TEST_TIME, kinetic_to_work, lab_case_check, planar_slab
-from demcli.stages.asphalt.common import quasi_static_warning
+from demcli.stages.asphalt.common import lab_case_check
+from demcli.stages.asphalt.diametral import declare_outputs, loading_fields, run_loading, specimen
 from demcli.stages.base import ENGINE_KEEPS, ENGINE_OUTPUT, StageType, register_stage
-from demcli.state.fields import Field, register, register_group
 from demcli.state.records import describe_column
 
-describe_column("deformation", "Deformation", "m", "mm", 1e3, table="idt", doc="approach of the two heads")
-describe_column("load", "Load", "N", "kN", 1e-3, table="idt", doc="force on the moving head, compression positive")
-describe_column("kinetic_to_work", "Kinetic energy / work", "1", table=None,
-                doc="kinetic energy of the bodies over the loading's work until then (quasi-static below 0.01)")
 describe_column("tensile_stress", "Nominal tensile stress", "Pa", "MPa", 1e-6, table="idt",
                 doc="2 P / (pi t D): the elastic tension across the loaded diameter")
-
-register_group("idt_result", "Indirect tension test result", writer="stage idt")
-for _name, _unit, _doc in [("peak_load", "N", "largest load P_max"),
-                           ("its", "Pa", "indirect tensile strength 2 P_max / (pi t D)"),
-                           ("deformation_at_peak", "m", "heads' approach at the peak load"),
-                           ("diameter", "m", "specimen diameter D"), ("thickness", "m", "specimen thickness t"),
-                           ("kinetic_to_work", "1", "kinetic energy at the peak / the head's work until then")]:
-    register(Field(f"idt_result/{_name}", "f", (), _unit, _doc, writer="stage idt"))
-
-
-def _fields():
-    f = {k: v for k, v in dem.FIELDS.items() if k not in ("walls", "stop", "time")}
-    f.update({
-        "speed": Float("m/s", min=0, min_inclusive=False, doc="head speed (the standards: 50.8 mm/min)"),
-        "max_deformation": Float(min=0, max=0.5, min_inclusive=False, default=0.1,
-                                 doc="stop at this approach of the heads, as a share of D"),
-        "post_peak": Float(min=0, max=1, default=0.5, doc="stop once the load falls below this share of the peak"),
-        "head_material": Str(doc="material of the loading heads"),
-        "quasi_static": Float(min=0, min_inclusive=False, default=0.01, doc=KINETIC_LIMIT_DOC),
-        "time": TEST_TIME,
-    })
-    return f
+declare_outputs("idt", "Indirect tension test result", [
+    ("peak_load", "N", "largest load P_max"), ("its", "Pa", "indirect tensile strength 2 P_max / (pi t D)"),
+    ("deformation_at_peak", "m", "heads' approach at the peak load"), ("diameter", "m", "specimen diameter D"),
+    ("thickness", "m", "specimen thickness t"),
+    ("kinetic_to_work", "1", "kinetic energy at the peak / the head's work until then")])
 
 
 def nominal_stress(load, thickness, diameter):
@@ -97,20 +72,6 @@ def _heads(cfg, x, rad, base, thickness):
                   "extent": (hi, *ext[1:3], hi, *ext[4:]), **common})], hi - lo
 
 
-def _specimen(ctx, groups, x):
-    """(D [m] or None, t [m], base (3,) [m]: centre of the disk's lower face) from the sphere
-    centres ``x`` (n, 3) [m]: the prepared cylinder's (3D), or for a 2D section D None (the
-    heads' first distance) and t the case's thickness, the base half a thickness below the
-    disks' plane."""
-    if ctx.case.dimension == 2:
-        t, z = planar_slab(ctx.case, x)
-        return None, t, np.array([*x[:, :2].mean(axis=0), z - 0.5 * t])
-    sp = groups.get("bonded_specimen")
-    if sp is None:
-        raise InputError(f"stage {ctx.name}: its input has no bonded_specimen group (written by a prepare stage)")
-    return 2.0 * float(sp["radius"]), float(sp["height"]), np.array([*x[:, :2].mean(axis=0), float(sp["base_z"])])
-
-
 def _case_check(cfg, case, k, scene, report):
     """The test stages' rules (:func:`lab_case_check`), and a 2D section cut by a polygons stage
     must be a circle (a disk is what the Brazilian solution describes)."""
@@ -124,78 +85,30 @@ def _case_check(cfg, case, k, scene, report):
 
 
 def run_idt(ctx, cfg, state_in):
-    """Diametral compression of the bonded specimen to failure (module doc)."""
-    from demcli.config.schema import Node
-    from demcli.state import RecordTable
-
+    """Diametral compression of the bonded specimen to failure between flat heads (module doc;
+    the loading: :func:`demcli.stages.asphalt.diametral.run_loading`)."""
     x = state_in.sphere_centres()  # (a clump's members: the 2D section's aggregates)
     rad = np.asarray(state_in.groups["spheres"]["radius"])
-    D, t, base = _specimen(ctx, state_in.groups, x)
+    D, t, base = specimen(ctx, state_in.groups, x)
     walls, gap0 = _heads(cfg, x, rad, base, t)
     D = gap0 if D is None else D
-    dcfg = dict(cfg)
-    dcfg.update(walls=walls, stop=None, time=Node({"duration": cfg.max_deformation * D / cfg.speed, "steps": None,
-                                                    "dt": cfg.time.dt, "dt_factor": cfg.time.dt_factor}))
-    cols = {"deformation": "m", "load": "N", "tensile_stress": "Pa"}
-    peak = [0.0]
 
-    def row(system):
-        p = float(-system.wforce[1] @ system.walls.normal[1])
-        peak[0] = max(peak[0], p)
-        return {"deformation": gap0 - float(system.wpoint[1, 0] - system.wpoint[0, 0]), "load": p,
-                "tensile_stress": nominal_stress(p, t, D)}
+    def result(p, d, ratio):
+        its = nominal_stress(p, t, D)
+        group = {"peak_load": np.float64(p), "its": np.float64(its), "deformation_at_peak": np.float64(d),
+                 "diameter": np.float64(D), "thickness": np.float64(t), "kinetic_to_work": np.float64(ratio)}
+        line = (f"indirect tension: peak load {p / 1e3:.4g} kN at {d * 1e3:.4g} mm, ITS = 2 P / (pi t D) = "
+                f"{its / 1e6:.4g} MPa (D {D * 1e3:.4g} mm, t {t * 1e3:.4g} mm); kinetic energy / work at the peak "
+                f"{float(group['kinetic_to_work']):.3g}")
+        return group, line, "lower the speed (halving it should leave the ITS unchanged)"
 
-    def stop(system, r):
-        # only once the specimen is breaking: a loose surface sphere pushed off the head drops the
-        # load of the first contacts to zero before the specimen carries any
-        broken = r.get("broken_tension", 0) + r.get("broken_shear", 0)
-        if peak[0] > 0 and r["load"] < cfg.post_peak * peak[0] and broken >= 0.01 * len(system.bonds):
-            return f"load {r['load'] / 1e3:.4g} kN below {cfg.post_peak:g} of the peak {peak[0] / 1e3:.4g} kN"
-        return None
-
-    def start(system, ckpt):
-        if ckpt is not None:
-            peak[0] = float(np.max(RecordTable.from_state(ckpt, "dem").to_arrays()["load"], initial=0.0))
-
-    def finish(ctx_, system, state, table):
-        _finish(ctx_, cfg, state, state_in, table, cols, D, t)
-
-    return loop.integrate(ctx, Node(dcfg), state_in, loop.Hooks(columns=cols, row=row, stop=stop, start=start,
-                                                                 finish=finish))
-
-
-def _finish(ctx, cfg, state, state_in, table, cols, D, t):
-    """The ``idt`` record (with the kinetic energy / work per row) and the result group; the
-    quasi-static check on the rows up to the peak (after it the specimen breaks, which is
-    dynamic at any head speed)."""
-    from demcli.state import RecordTable
-
-    rows = table.to_arrays()
-    d, p = np.asarray(rows["deformation"]), np.asarray(rows["load"])
-    ratio, work = kinetic_to_work(rows["kinetic"], p, d)
-    keep = ["time", *cols] + [c for c in ("bonds_intact", "broken_tension", "broken_shear") if c in rows]
-    out = RecordTable("idt", {**{c: table.columns[c] for c in keep}, "kinetic_to_work": "1"})
-    for k in range(len(rows["time"])):
-        out.append({**{c: rows[c][k] for c in keep}, "kinetic_to_work": ratio[k]})
-    out.to_state(state)
-    ctx.write_records(out, x="deformation", ys=["load"])
-    k = int(np.argmax(p))
-    its = nominal_stress(p[k], t, D)
-    state.groups["idt_result"] = {"peak_load": np.float64(p[k]), "its": np.float64(its),
-                                  "deformation_at_peak": np.float64(d[k]), "diameter": np.float64(D),
-                                  "thickness": np.float64(t),
-                                  "kinetic_to_work": np.float64(ratio[k] if work[k] > 0 else math.inf)}
-    if "bonded_specimen" in state_in.groups:
-        state.groups["bonded_specimen"] = dict(state_in.groups["bonded_specimen"])
-    ctx.log(f"indirect tension: peak load {p[k] / 1e3:.4g} kN at {d[k] * 1e3:.4g} mm, ITS = 2 P / (pi t D) = "
-            f"{its / 1e6:.4g} MPa (D {D * 1e3:.4g} mm, t {t * 1e3:.4g} mm); kinetic energy / work at the peak "
-            f"{float(state.groups['idt_result']['kinetic_to_work']):.3g}")
-    quasi_static_warning(ctx, ratio, work, cfg.quasi_static, "lower the speed (halving it should leave the ITS "
-                         "unchanged)", upto=k)
+    return run_loading(ctx, cfg, state_in, walls, gap0, D, "idt",
+                       ({"tensile_stress": "Pa"}, lambda p: {"tensile_stress": nominal_stress(p, t, D)}), result)
 
 
 register_stage(StageType(
-    "idt", _fields(), run_idt, needs_input=True, requires=("bodies/x", "spheres/radius"),
+    "idt", loading_fields("head speed (the standards: 50.8 mm/min)"), run_idt, needs_input=True,
+    requires=("bodies/x", "spheres/radius"),
     provides=ENGINE_OUTPUT + ("idt_result/*",), keeps=ENGINE_KEEPS + ("bonded_specimen",),
     case_check=_case_check,
     doc="indirect tension (diametral compression) of a bonded cylinder or 2D disk section: load, ITS = 2 P / (pi t D)"))
