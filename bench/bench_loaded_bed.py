@@ -63,7 +63,8 @@ def loaded_system(case_path, state, threads):
     act["load_mean"] = np.tile(cfg.load.max * down, (len(act["body"]), 1))
     act["load_amplitude"] = np.zeros_like(act["load_mean"])
     groups["actors"] = act
-    system, _, dt, _ = loop.make_system(SimpleNamespace(case=case, name="bench", log=lambda m: None), Node(dcfg),
+    system, _, dt, _ = loop.make_system(SimpleNamespace(case=case, name="bench", index=0, runner=SimpleNamespace(case_path=case_path),
+                                                       log=lambda m: None), Node(dcfg),
                                        groups, time=0.0, step=0, resume=True)
     system.dt = dt
     return system

@@ -32,7 +32,7 @@ def main(argv=None):
     case = load_case(case_path)
     st = read_state(state_path)
     cfg = case.stages[[s.name for s in case.stages].index("deposit")]
-    ctx = SimpleNamespace(case=case, name="bench")
+    ctx = SimpleNamespace(case=case, name="bench", index=0, runner=SimpleNamespace(case_path=case_path))
 
     def build():
         s, _, dt, _ = loop.make_system(ctx, cfg, st.groups)
