@@ -133,7 +133,12 @@ Reference counting: numba updates an atomic reference count whenever an array is
 rebound or passed to an inlined helper; in the clipping loop that cost more than
 the geometry, so the clipping and cone sums are written out in
 :func:`_faces_inside`, the polygon buffers are addressed by row offsets and the
-scratch by flat offsets (no array views).
+scratch by flat offsets (no array views). The geometry kernels the pair and wall passes call
+(:func:`overlap_ws`, :func:`overlap_in_box`, :func:`_clip_in_box`, :func:`_faces_inside`,
+:func:`plane_overlap_ws`) allocate nothing and are compiled without reference counting
+(numba's ``_nrt=False``): their calls passed each array on with an atomic increment and
+decrement (16 and 14 in the first two): on the loaded quickstart bed the step per touching pair
+fell from 1.5 to 1.3 us (4.3e5 -> 5.0e5 body-steps/s, bench/README.md).
 :func:`overlap_ws` takes caller-owned scratch (one set per thread, from
 :func:`scratch`); :func:`overlap` allocates it per call (~5 % slower).
 
@@ -384,7 +389,7 @@ def _band_deficit(buf, src, m, dst, sd, fnx, fny, fnz, n2, d2, planes, p0, ncut,
 
 # Not internal (measured: as an internal kernel its type inference took 8.3-10.2 s of a cold
 # polyhedral compile, with its Python wrapper 4.7-6.1 s; 5 runs each, cause inside numba not found)
-@njit
+@njit(_nrt=False)
 def _faces_inside(v1, fs1, fv1, off1, n1, d1, planes, f0, nfaces1, n2, d2, p0, nplanes2, q0, nnear2, tol, band,
                   first, buf, cap, fw):
     """Pieces of the faces planes[f0:f0 + nfaces1] of body 1 inside body 2, added to
@@ -699,7 +704,7 @@ def overlap(va, fsa, fva, offa, na, da, cax, cay, caz, ra,
                       vb, fsb, fvb, offb, nb, db, cbx, cby, cbz, rb, buf, fw, planes)
 
 
-@njit
+@njit(_nrt=False)
 def overlap_ws(va, fsa, fva, offa, na, da, cax, cay, caz, ra,
                vb, fsb, fvb, offb, nb, db, cbx, cby, cbz, rb, buf, fw, planes):
     """:func:`overlap` with caller-owned scratch (allocate once per thread):
@@ -738,7 +743,7 @@ def overlap_ws(va, fsa, fva, offa, na, da, cax, cay, caz, ra,
     return _finish(fw, 18, mx_, my_, mz_)
 
 
-@njit(internal=True)
+@njit(internal=True, _nrt=False)
 def _clip_in_box(va, fsa, fva, offa, na, da, vb, fsb, fvb, offb, nb, db, ux, uy, uz, tol, band, buf, fw, planes):
     """The boundary pieces of A n B that the culling box fw[0:6] holds, summed into fw[18:36]
     (:func:`_faces_inside`): the planes of A and of B that cut the box (sorted by their normals'
@@ -769,7 +774,7 @@ def _clip_in_box(va, fsa, fva, offa, na, da, vb, fsb, fvb, offb, nb, db, ux, uy,
     return True
 
 
-@njit
+@njit(_nrt=False)
 def overlap_in_box(va, fsa, fva, offa, na, da, cax, cay, caz, ra,
                    vb, fsb, fvb, offb, nb, db, cbx, cby, cbz, rb, box, buf, fw, planes):
     """:func:`overlap_ws` culled by a given box instead of the bodies' bounding boxes (temporal
@@ -863,7 +868,7 @@ def plane_scratch(max_face_vertices, max_vertices):
     return np.empty((2 * cap, 3)), np.empty(max_vertices), np.empty(cap), np.empty(18)
 
 
-@njit
+@njit(_nrt=False)
 def plane_overlap_ws(va, fsa, fva, offa, na, da, cax, cay, caz, ra, wnx, wny, wnz, wd, buf, heights, sd, work):
     """:func:`plane_overlap` with caller-owned scratch (:func:`plane_scratch`): buf (2 cap, 3),
     heights (>= n_v,), sd (cap,), work (18,), cap = (largest face vertex count) + 2.

@@ -67,6 +67,8 @@ N_QPARAMS = 3
 SEP_NONE = -(2 ** 30)
 SEP_DIR = SEP_NONE + 1
 SEP_ITER = 32  # GJK iterations allowed when searching a separating direction
+# the pair and wall passes run over chunks of this many rows (bodies), the scratch allocated once per chunk
+ROW_CHUNK = 16
 SEP_MARGIN = 1e-9  # a cached face or direction must clear by this x (r_i + r_j) + 1e-12 max |x|
 # columns of geo / wgeo (per contact, last evaluation): depth d [m], elastic normal force F_N [N],
 # tangential stiffness K_t [N/m]
@@ -239,182 +241,186 @@ def _pair_forces(start, pj, x, v, w, mass, rad, bmat, prm, sw, dt,
     # scratch of overlap_ws for any pair of these shapes: largest face, most faces
     max_fv = max_row(fvstart)
     max_f = max_row(face_start)
-    for i in prange(r0, start.shape[0] - 1):
-        sfx = 0.0
-        sfy = 0.0
-        sfz = 0.0
-        stx = 0.0
-        sty = 0.0
-        stz = 0.0
-        se0 = 0.0
-        se1 = 0.0
-        c0 = start[i]
-        c1 = start[i + 1]
-        if c1 > c0:
-            buf, fw, planes = scratch(max_fv, max_f)  # once per row, not per pair
-            box = np.empty(6)
-            xi0 = x[i, 0]
-            xi1 = x[i, 1]
-            xi2 = x[i, 2]
-            ri = rad[i]
-            ki = shape[i]
-            va = wvert[bvstart[i]:bvstart[i + 1]]
-            na = wnorm[bfstart[i]:bfstart[i + 1]]
-            da = woff[bfstart[i]:bfstart[i + 1]]
-            fsa = fvstart[face_start[ki]:face_start[ki + 1] + 1]
-            offa = vertex_start[ki]
-            mi = mass[i]
-            for c in range(c0, c1):
-                j = pj[c]
-                xj0 = x[j, 0]
-                xj1 = x[j, 1]
-                xj2 = x[j, 2]
-                dx = xi0 - xj0
-                dy = xi1 - xj1
-                dz = xi2 - xj2
-                rj = rad[j]
-                rs = ri + rj
-                vol = 0.0
-                gx = gy = gz = sx = sy = sz = 0.0
-                if dx * dx + dy * dy + dz * dz < rs * rs:
-                    kj = shape[j]
-                    vb = wvert[bvstart[j]:bvstart[j + 1]]
-                    nb_ = wnorm[bfstart[j]:bfstart[j + 1]]
-                    db_ = woff[bfstart[j]:bfstart[j + 1]]
-                    fsb = fvstart[face_start[kj]:face_start[kj + 1] + 1]
-                    if pbox[c, 3] > pbox[c, 0]:  # touching at the last evaluation: coherent culling
-                        pad = BOX_PAD * min(ri, rj)
-                        for k in range(3):
-                            box[k] = pbox[c, k] - pad
-                            box[3 + k] = pbox[c, 3 + k] + pad
-                        ok, vol, gx, gy, gz, sx, sy, sz = overlap_in_box(
-                            va, fsa, fverts, offa, na, da, xi0, xi1, xi2, ri,
-                            vb, fsb, fverts, vertex_start[kj], nb_, db_, xj0, xj1, xj2, rj, box, buf, fw, planes)
-                        if not ok:
-                            vol, gx, gy, gz, sx, sy, sz = overlap_ws(
+    nrow = start.shape[0] - 1
+    for ch in prange((nrow - r0 + ROW_CHUNK - 1) // ROW_CHUNK):
+        # scratch of overlap_ws once per chunk of rows: an allocation per row cost 12-19 % of the loaded bed's
+        # step (bench/README.md, "Temporal coherence on the loaded bed")
+        buf, fw, planes = scratch(max_fv, max_f)
+        box = np.empty(6)
+        for i in range(r0 + ch * ROW_CHUNK, min(r0 + (ch + 1) * ROW_CHUNK, nrow)):
+            sfx = 0.0
+            sfy = 0.0
+            sfz = 0.0
+            stx = 0.0
+            sty = 0.0
+            stz = 0.0
+            se0 = 0.0
+            se1 = 0.0
+            c0 = start[i]
+            c1 = start[i + 1]
+            if c1 > c0:
+                xi0 = x[i, 0]
+                xi1 = x[i, 1]
+                xi2 = x[i, 2]
+                ri = rad[i]
+                ki = shape[i]
+                va = wvert[bvstart[i]:bvstart[i + 1]]
+                na = wnorm[bfstart[i]:bfstart[i + 1]]
+                da = woff[bfstart[i]:bfstart[i + 1]]
+                fsa = fvstart[face_start[ki]:face_start[ki + 1] + 1]
+                offa = vertex_start[ki]
+                mi = mass[i]
+                for c in range(c0, c1):
+                    j = pj[c]
+                    xj0 = x[j, 0]
+                    xj1 = x[j, 1]
+                    xj2 = x[j, 2]
+                    dx = xi0 - xj0
+                    dy = xi1 - xj1
+                    dz = xi2 - xj2
+                    rj = rad[j]
+                    rs = ri + rj
+                    vol = 0.0
+                    gx = gy = gz = sx = sy = sz = 0.0
+                    if dx * dx + dy * dy + dz * dz < rs * rs:
+                        kj = shape[j]
+                        vb = wvert[bvstart[j]:bvstart[j + 1]]
+                        nb_ = wnorm[bfstart[j]:bfstart[j + 1]]
+                        db_ = woff[bfstart[j]:bfstart[j + 1]]
+                        fsb = fvstart[face_start[kj]:face_start[kj + 1] + 1]
+                        if pbox[c, 3] > pbox[c, 0]:  # touching at the last evaluation: coherent culling
+                            pad = BOX_PAD * min(ri, rj)
+                            for k in range(3):
+                                box[k] = pbox[c, k] - pad
+                                box[3 + k] = pbox[c, 3 + k] + pad
+                            ok, vol, gx, gy, gz, sx, sy, sz = overlap_in_box(
                                 va, fsa, fverts, offa, na, da, xi0, xi1, xi2, ri,
-                                vb, fsb, fverts, vertex_start[kj], nb_, db_, xj0, xj1, xj2, rj, buf, fw, planes)
-                    else:
-                        code = sep[c]
-                        margin = SEP_MARGIN * rs + 1e-12 * max(abs(xi0), abs(xi1), abs(xi2), abs(xj0), abs(xj1),
-                                                              abs(xj2))
-                        moved = travel[i] + travel[j]
-                        if sclear[c] - moved > margin:  # not moved enough since the cache last cleared them
-                            apart = True
-                        elif code == SEP_DIR:
-                            g_ = gap(sdir[c, 0], sdir[c, 1], sdir[c, 2], va, vb)
-                            if not g_ > margin:
-                                found, ux, uy, uz = separating_direction(va, vb, sdir[c, 0], sdir[c, 1], sdir[c, 2],
-                                                                         margin, SEP_ITER, buf)
-                                g_ = -math.inf
-                                if found:
-                                    sdir[c, 0] = ux
-                                    sdir[c, 1] = uy
-                                    sdir[c, 2] = uz
-                                    g_ = gap(ux, uy, uz, va, vb)
-                            apart = g_ > margin
-                            if apart:
-                                sclear[c] = g_ + moved
+                                vb, fsb, fverts, vertex_start[kj], nb_, db_, xj0, xj1, xj2, rj, box, buf, fw, planes)
+                            if not ok:
+                                vol, gx, gy, gz, sx, sy, sz = overlap_ws(
+                                    va, fsa, fverts, offa, na, da, xi0, xi1, xi2, ri,
+                                    vb, fsb, fverts, vertex_start[kj], nb_, db_, xj0, xj1, xj2, rj, buf, fw, planes)
                         else:
-                            apart = code != 0 and code != SEP_NONE
-                            if apart:
-                                g_ = _face_gap(code, na, da, va, nb_, db_, vb, margin)
-                                apart = g_ > margin
-                                if apart:
-                                    sclear[c] = g_ + moved
-                        if apart:
-                            vol = 0.0
-                        else:
-                            vol, gx, gy, gz, sx, sy, sz = overlap_ws(
-                                va, fsa, fverts, offa, na, da, xi0, xi1, xi2, ri,
-                                vb, fsb, fverts, vertex_start[kj], nb_, db_, xj0, xj1, xj2, rj, buf, fw, planes)
-                            if not vol > 0.0 and code != SEP_NONE:
-                                ga, fa = _clearance(na, da, vb)
-                                gb, fb = _clearance(nb_, db_, va)
-                                if ga > margin and ga >= gb:
-                                    sep[c] = fa + 1
-                                    sclear[c] = ga + moved
-                                elif gb > margin:
-                                    sep[c] = -(fb + 1)
-                                    sclear[c] = gb + moved
-                                else:
-                                    found, ux, uy, uz = separating_direction(va, vb, -dx, -dy, -dz, margin, SEP_ITER,
-                                                                             buf)
+                            code = sep[c]
+                            margin = SEP_MARGIN * rs + 1e-12 * max(abs(xi0), abs(xi1), abs(xi2), abs(xj0), abs(xj1),
+                                                                  abs(xj2))
+                            moved = travel[i] + travel[j]
+                            if sclear[c] - moved > margin:  # not moved enough since the cache last cleared them
+                                apart = True
+                            elif code == SEP_DIR:
+                                g_ = gap(sdir[c, 0], sdir[c, 1], sdir[c, 2], va, vb)
+                                if not g_ > margin:
+                                    found, ux, uy, uz = separating_direction(va, vb, sdir[c, 0], sdir[c, 1], sdir[c, 2],
+                                                                             margin, SEP_ITER, buf)
+                                    g_ = -math.inf
                                     if found:
-                                        sep[c] = SEP_DIR
                                         sdir[c, 0] = ux
                                         sdir[c, 1] = uy
                                         sdir[c, 2] = uz
-                                        sclear[c] = gap(ux, uy, uz, va, vb) + moved
+                                        g_ = gap(ux, uy, uz, va, vb)
+                                apart = g_ > margin
+                                if apart:
+                                    sclear[c] = g_ + moved
+                            else:
+                                apart = code != 0 and code != SEP_NONE
+                                if apart:
+                                    g_ = _face_gap(code, na, da, va, nb_, db_, vb, margin)
+                                    apart = g_ > margin
+                                    if apart:
+                                        sclear[c] = g_ + moved
+                            if apart:
+                                vol = 0.0
+                            else:
+                                vol, gx, gy, gz, sx, sy, sz = overlap_ws(
+                                    va, fsa, fverts, offa, na, da, xi0, xi1, xi2, ri,
+                                    vb, fsb, fverts, vertex_start[kj], nb_, db_, xj0, xj1, xj2, rj, buf, fw, planes)
+                                if not vol > 0.0 and code != SEP_NONE:
+                                    ga, fa = _clearance(na, da, vb)
+                                    gb, fb = _clearance(nb_, db_, va)
+                                    if ga > margin and ga >= gb:
+                                        sep[c] = fa + 1
+                                        sclear[c] = ga + moved
+                                    elif gb > margin:
+                                        sep[c] = -(fb + 1)
+                                        sclear[c] = gb + moved
                                     else:
-                                        sep[c] = SEP_NONE
-                            elif vol > 0.0:
-                                sep[c] = 0
-                if vol > 0.0:  # the pieces' box of this evaluation (fw[22:28]): the next step's culling box
-                    for k in range(6):
-                        pbox[c, k] = fw[22 + k]
-                elif pbox[c, 3] != 0.0 or pbox[c, 0] != 0.0:
-                    for k in range(6):
-                        pbox[c, k] = 0.0
-                if not vol > 0.0:
-                    if act[c]:
-                        act[c] = 0
-                        geo[c, 0] = 0.0
-                        geo[c, 1] = 0.0
-                        geo[c, 2] = 0.0
-                        fc[c, 0] = 0.0
-                        fc[c, 1] = 0.0
-                        fc[c, 2] = 0.0
-                    if friction:  # the contact opened (or a carried one never closed): history dropped
-                        ft[c, 0] = 0.0
-                        ft[c, 1] = 0.0
-                        ft[c, 2] = 0.0
-                    continue
-                act[c] = 1
-                nx, ny, nz, area, depth = contact_frame(vol, sx, sy, sz, xi0, xi1, xi2, xj0, xj1, xj2, ri, rj)
-                # branches from the centroids to the contact point, and its relative velocity
-                aix = gx - xi0
-                aiy = gy - xi1
-                aiz = gz - xi2
-                ajx = gx - xj0
-                ajy = gy - xj1
-                ajz = gz - xj2
-                vx = (v[i, 0] + w[i, 1] * aiz - w[i, 2] * aiy) - (v[j, 0] + w[j, 1] * ajz - w[j, 2] * ajy)
-                vy = (v[i, 1] + w[i, 2] * aix - w[i, 0] * aiz) - (v[j, 1] + w[j, 2] * ajx - w[j, 0] * ajz)
-                vz = (v[i, 2] + w[i, 0] * aiy - w[i, 1] * aix) - (v[j, 2] + w[j, 0] * ajy - w[j, 1] * ajx)
-                mj = mass[j]
-                fx, fy, fz, ed, ef, fel, _, kt = _volumetric_law(
-                    prm, bmat[i], bmat[j], vol, depth, area, nx, ny, nz, vx, vy, vz, mi * mj / (mi + mj), dt,
-                    ft, c, friction, dashpot)
-                fc[c, 0] = fx
-                fc[c, 1] = fy
-                fc[c, 2] = fz
-                geo[c, 0] = depth
-                geo[c, 1] = fel
-                geo[c, 2] = kt
-                sfx += fx
-                sfy += fy
-                sfz += fz
-                stx += aiy * fz - aiz * fy
-                sty += aiz * fx - aix * fz
-                stz += aix * fy - aiy * fx
-                tj[c, 0] = -(ajy * fz - ajz * fy)
-                tj[c, 1] = -(ajz * fx - ajx * fz)
-                tj[c, 2] = -(ajx * fy - ajy * fx)
-                if energy:
-                    epair[c, 0] = ed
-                    epair[c, 1] = ef
-                    se0 += ed
-                    se1 += ef
-        frow[i, 0] = sfx
-        frow[i, 1] = sfy
-        frow[i, 2] = sfz
-        trow[i, 0] = stx
-        trow[i, 1] = sty
-        trow[i, 2] = stz
-        if energy:
-            erow[i, 0] = se0
-            erow[i, 1] = se1
+                                        found, ux, uy, uz = separating_direction(va, vb, -dx, -dy, -dz, margin, SEP_ITER,
+                                                                                 buf)
+                                        if found:
+                                            sep[c] = SEP_DIR
+                                            sdir[c, 0] = ux
+                                            sdir[c, 1] = uy
+                                            sdir[c, 2] = uz
+                                            sclear[c] = gap(ux, uy, uz, va, vb) + moved
+                                        else:
+                                            sep[c] = SEP_NONE
+                                elif vol > 0.0:
+                                    sep[c] = 0
+                    if vol > 0.0:  # the pieces' box of this evaluation (fw[22:28]): the next step's culling box
+                        for k in range(6):
+                            pbox[c, k] = fw[22 + k]
+                    elif pbox[c, 3] != 0.0 or pbox[c, 0] != 0.0:
+                        for k in range(6):
+                            pbox[c, k] = 0.0
+                    if not vol > 0.0:
+                        if act[c]:
+                            act[c] = 0
+                            geo[c, 0] = 0.0
+                            geo[c, 1] = 0.0
+                            geo[c, 2] = 0.0
+                            fc[c, 0] = 0.0
+                            fc[c, 1] = 0.0
+                            fc[c, 2] = 0.0
+                        if friction:  # the contact opened (or a carried one never closed): history dropped
+                            ft[c, 0] = 0.0
+                            ft[c, 1] = 0.0
+                            ft[c, 2] = 0.0
+                        continue
+                    act[c] = 1
+                    nx, ny, nz, area, depth = contact_frame(vol, sx, sy, sz, xi0, xi1, xi2, xj0, xj1, xj2, ri, rj)
+                    # branches from the centroids to the contact point, and its relative velocity
+                    aix = gx - xi0
+                    aiy = gy - xi1
+                    aiz = gz - xi2
+                    ajx = gx - xj0
+                    ajy = gy - xj1
+                    ajz = gz - xj2
+                    vx = (v[i, 0] + w[i, 1] * aiz - w[i, 2] * aiy) - (v[j, 0] + w[j, 1] * ajz - w[j, 2] * ajy)
+                    vy = (v[i, 1] + w[i, 2] * aix - w[i, 0] * aiz) - (v[j, 1] + w[j, 2] * ajx - w[j, 0] * ajz)
+                    vz = (v[i, 2] + w[i, 0] * aiy - w[i, 1] * aix) - (v[j, 2] + w[j, 0] * ajy - w[j, 1] * ajx)
+                    mj = mass[j]
+                    fx, fy, fz, ed, ef, fel, _, kt = _volumetric_law(
+                        prm, bmat[i], bmat[j], vol, depth, area, nx, ny, nz, vx, vy, vz, mi * mj / (mi + mj), dt,
+                        ft, c, friction, dashpot)
+                    fc[c, 0] = fx
+                    fc[c, 1] = fy
+                    fc[c, 2] = fz
+                    geo[c, 0] = depth
+                    geo[c, 1] = fel
+                    geo[c, 2] = kt
+                    sfx += fx
+                    sfy += fy
+                    sfz += fz
+                    stx += aiy * fz - aiz * fy
+                    sty += aiz * fx - aix * fz
+                    stz += aix * fy - aiy * fx
+                    tj[c, 0] = -(ajy * fz - ajz * fy)
+                    tj[c, 1] = -(ajz * fx - ajx * fz)
+                    tj[c, 2] = -(ajx * fy - ajy * fx)
+                    if energy:
+                        epair[c, 0] = ed
+                        epair[c, 1] = ef
+                        se0 += ed
+                        se1 += ef
+            frow[i, 0] = sfx
+            frow[i, 1] = sfy
+            frow[i, 2] = sfz
+            trow[i, 0] = stx
+            trow[i, 1] = sty
+            trow[i, 2] = stz
+            if energy:
+                erow[i, 0] = se0
+                erow[i, 1] = se1
 
 
 @njit
@@ -467,73 +473,77 @@ def _wall_forces(wstart, wwall, x, v, w, mass, rad, bmat, shape, vertex_start, f
                  wft, wfc, wtq, wen, wgeo, r0):
     """Per body (prange), its plane-wall contacts (rows wstart[b]..wstart[b + 1], race-free);
     bodies from ``r0`` (0; a mixed scene: its polyhedra)."""
-    for b in prange(r0, wstart.shape[0] - 1):
-        k0 = wstart[b]
-        k1 = wstart[b + 1]
-        if k1 == k0:
-            continue
-        kb = shape[b]
-        rb = rad[b]
-        va = wvert[bvstart[b]:bvstart[b + 1]]
-        na = wnorm[bfstart[b]:bfstart[b + 1]]
-        da = woff[bfstart[b]:bfstart[b + 1]]
-        fsa = fvstart[face_start[kb]:face_start[kb + 1] + 1]
-        offa = vertex_start[kb]
-        buf, heights, sd, work = plane_scratch(max_row(fsa), va.shape[0])  # once per body
-        xb0 = x[b, 0]
-        xb1 = x[b, 1]
-        xb2 = x[b, 2]
-        m = mass[b]
-        for k in range(k0, k1):
-            wl = wwall[k]
-            wnx = wnormal[wl, 0]
-            wny = wnormal[wl, 1]
-            wnz = wnormal[wl, 2]
-            vol = 0.0
-            gx = gy = gz = sx = sy = sz = 0.0
-            if wkind[wl] == 0:  # plane; the registry refuses other kinds for polyhedra
-                wd = wnx * wpoint[wl, 0] + wny * wpoint[wl, 1] + wnz * wpoint[wl, 2]
-                vol, gx, gy, gz, sx, sy, sz = plane_overlap_ws(va, fsa, fverts, offa, na, da, xb0, xb1, xb2, rb,
-                                                               wnx, wny, wnz, wd, buf, heights, sd, work)
-            if not vol > 0.0:
-                for col in range(4):
-                    wfc[k, col] = 0.0
-                for col in range(3):
-                    wtq[k, col] = 0.0
-                    wgeo[k, col] = 0.0
-                if energy:
-                    wen[k, 0] = 0.0
-                    wen[k, 1] = 0.0
-                if friction:
-                    wft[k, 0] = 0.0
-                    wft[k, 1] = 0.0
-                    wft[k, 2] = 0.0
+    nrow = wstart.shape[0] - 1
+    max_fv = max_row(fvstart)
+    max_v = max_row(bvstart)
+    for ch in prange((nrow - r0 + ROW_CHUNK - 1) // ROW_CHUNK):
+        buf, heights, sd, work = plane_scratch(max_fv, max_v)  # once per chunk of bodies
+        for b in range(r0 + ch * ROW_CHUNK, min(r0 + (ch + 1) * ROW_CHUNK, nrow)):
+            k0 = wstart[b]
+            k1 = wstart[b + 1]
+            if k1 == k0:
                 continue
-            # B = the wall: its "centre" one unit behind the body along the wall normal, so the
-            # normal falls back to n_w if the cross-section vanishes (body wholly in the wall)
-            nx, ny, nz, area, depth = contact_frame(vol, sx, sy, sz, xb0, xb1, xb2, xb0 - wnx, xb1 - wny,
-                                                    xb2 - wnz, rb, rb)
-            ax = gx - xb0
-            ay = gy - xb1
-            az = gz - xb2
-            vx = v[b, 0] + w[b, 1] * az - w[b, 2] * ay - wv[wl, 0]
-            vy = v[b, 1] + w[b, 2] * ax - w[b, 0] * az - wv[wl, 1]
-            vz = v[b, 2] + w[b, 0] * ay - w[b, 1] * ax - wv[wl, 2]
-            cfx, cfy, cfz, ed, ef, fel, kserv, kt = _volumetric_law(
-                prm, bmat[b], wmat[wl], vol, depth, area, nx, ny, nz, vx, vy, vz, m, dt, wft, k, friction, dashpot)
-            wfc[k, 0] = cfx
-            wfc[k, 1] = cfy
-            wfc[k, 2] = cfz
-            wfc[k, 3] = kserv
-            wtq[k, 0] = ay * cfz - az * cfy
-            wtq[k, 1] = az * cfx - ax * cfz
-            wtq[k, 2] = ax * cfy - ay * cfx
-            wgeo[k, 0] = depth
-            wgeo[k, 1] = fel
-            wgeo[k, 2] = kt
-            if energy:
-                wen[k, 0] = ed
-                wen[k, 1] = ef
+            kb = shape[b]
+            rb = rad[b]
+            va = wvert[bvstart[b]:bvstart[b + 1]]
+            na = wnorm[bfstart[b]:bfstart[b + 1]]
+            da = woff[bfstart[b]:bfstart[b + 1]]
+            fsa = fvstart[face_start[kb]:face_start[kb + 1] + 1]
+            offa = vertex_start[kb]
+            xb0 = x[b, 0]
+            xb1 = x[b, 1]
+            xb2 = x[b, 2]
+            m = mass[b]
+            for k in range(k0, k1):
+                wl = wwall[k]
+                wnx = wnormal[wl, 0]
+                wny = wnormal[wl, 1]
+                wnz = wnormal[wl, 2]
+                vol = 0.0
+                gx = gy = gz = sx = sy = sz = 0.0
+                if wkind[wl] == 0:  # plane; the registry refuses other kinds for polyhedra
+                    wd = wnx * wpoint[wl, 0] + wny * wpoint[wl, 1] + wnz * wpoint[wl, 2]
+                    vol, gx, gy, gz, sx, sy, sz = plane_overlap_ws(va, fsa, fverts, offa, na, da, xb0, xb1, xb2, rb,
+                                                                   wnx, wny, wnz, wd, buf, heights, sd, work)
+                if not vol > 0.0:
+                    for col in range(4):
+                        wfc[k, col] = 0.0
+                    for col in range(3):
+                        wtq[k, col] = 0.0
+                        wgeo[k, col] = 0.0
+                    if energy:
+                        wen[k, 0] = 0.0
+                        wen[k, 1] = 0.0
+                    if friction:
+                        wft[k, 0] = 0.0
+                        wft[k, 1] = 0.0
+                        wft[k, 2] = 0.0
+                    continue
+                # B = the wall: its "centre" one unit behind the body along the wall normal, so the
+                # normal falls back to n_w if the cross-section vanishes (body wholly in the wall)
+                nx, ny, nz, area, depth = contact_frame(vol, sx, sy, sz, xb0, xb1, xb2, xb0 - wnx, xb1 - wny,
+                                                        xb2 - wnz, rb, rb)
+                ax = gx - xb0
+                ay = gy - xb1
+                az = gz - xb2
+                vx = v[b, 0] + w[b, 1] * az - w[b, 2] * ay - wv[wl, 0]
+                vy = v[b, 1] + w[b, 2] * ax - w[b, 0] * az - wv[wl, 1]
+                vz = v[b, 2] + w[b, 0] * ay - w[b, 1] * ax - wv[wl, 2]
+                cfx, cfy, cfz, ed, ef, fel, kserv, kt = _volumetric_law(
+                    prm, bmat[b], wmat[wl], vol, depth, area, nx, ny, nz, vx, vy, vz, m, dt, wft, k, friction, dashpot)
+                wfc[k, 0] = cfx
+                wfc[k, 1] = cfy
+                wfc[k, 2] = cfz
+                wfc[k, 3] = kserv
+                wtq[k, 0] = ay * cfz - az * cfy
+                wtq[k, 1] = az * cfx - ax * cfz
+                wtq[k, 2] = ax * cfy - ay * cfx
+                wgeo[k, 0] = depth
+                wgeo[k, 1] = fel
+                wgeo[k, 2] = kt
+                if energy:
+                    wen[k, 0] = ed
+                    wen[k, 1] = ef
 
 
 @njit
