@@ -157,7 +157,7 @@ def _closest(w, n):
     return bx, by, bz, _keep(w, 4, b0, b1, b2)
 
 
-@njit
+@njit(_nrt=False)
 def separating_direction(va, vb, dx, dy, dz, margin, max_iter, w):
     """A unit direction u with gap(u) > margin (B beyond A along u), searched by GJK.
 

@@ -90,7 +90,7 @@ def _segment_point(cx, cy, cz, ax, ay, az, bx, by, bz):
     return (cx - qx) ** 2 + (cy - qy) ** 2 + (cz - qz) ** 2, qx, qy, qz
 
 
-@njit
+@njit(_nrt=False)
 def closest_feature(cx, cy, cz, v, fs, fv, off, n, d):
     """Signed distance from the point c [m] to the polyhedron surface, closest point, normal.
 
@@ -152,7 +152,7 @@ def closest_feature(cx, cy, cz, v, fs, fv, off, n, d):
     return s, px, py, pz, n[f, 0], n[f, 1], n[f, 2]
 
 
-@njit
+@njit(_nrt=False)
 def sphere_polyhedron_overlap(cx, cy, cz, r, v, fs, fv, off, n, d):
     """Point contact of the sphere (centre c, radius r [m]) and a polyhedron (world arrays v,
     fs, fv, off, n, d, see the module docstring).
