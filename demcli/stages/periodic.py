@@ -1,0 +1,109 @@
+"""The ``periodic`` key of a dem stage: a periodic cell under stress or strain control (docs/periodic.md).
+
+Schema and rules of the section, the cell a stage starts with (:func:`attach`), and the record
+columns (:func:`hooks`). A periodic cell is for spheres-only 3D scenes without walls, bonds or
+gravity; the measures that look at positions without the minimum image (regions, fields, force
+chains, the packing and contact records) are refused with it.
+"""
+
+from demcli.config.schema import Float, Optional, Section, Tagged, Vector
+from demcli.errors import InputError
+from demcli.stages.base import has_field
+
+AXIS = Tagged("mode", {
+    "rate": Section({"rate": Float("1/s", default=0.0, doc="strain rate edot = dL/dt / L, extension positive "
+                                                           "(compression: negative)")}),
+    "stress": Section({"stress": Float("Pa", min=0, doc="target normal stress sigma_dd, compression positive")}),
+}, default={"mode": "rate"}, doc="how the cell's edge along this axis moves: a prescribed strain rate, or the servo "
+                                 "to a normal stress")
+
+
+def _check_cell(node, report):
+    for d, a in enumerate("xyz"):
+        if node.max[d] <= node.min[d]:
+            report("max", f"must exceed min along {a}", list(node.max))
+            return
+
+
+PERIODIC = Optional(Section({
+    "cell": Optional(Section({"min": Vector(3, "m"), "max": Vector(3, "m")}, check=_check_cell),
+                     doc="the cell box; the positions are moved by -min (default: the input's cell, else the box "
+                         "bounding the spheres)"),
+    "x": AXIS, "y": AXIS, "z": AXIS,
+    "gain": Float(min=0, max=1, min_inclusive=False, default=0.01,
+                  doc="servo beta: the share of a stress error the servo would close in one step if the packing "
+                      "answered affinely; stable for beta < 2, quasi-static for dt / beta >> the cell's wave "
+                      "transit time (docs/periodic.md)"),
+    "max_rate": Float("1/s", min=0, min_inclusive=False, default=1.0, doc="bound on a servo axis's strain rate"),
+}), doc="a periodic orthorhombic cell (spheres only, 3D, no walls, bonds or gravity; docs/periodic.md)")
+
+REFUSED = (("walls", "a periodic cell has no walls"), ("bonds", "bonds are not yet periodic"),
+           ("physics.gravity", "a periodic cell has no floor: gravity would accelerate it for ever"),
+           ("measure", "the measures are not yet periodic"), ("output.fields", "coarse graining is not yet periodic"),
+           ("output.force_chains", "force chains are not yet periodic"),
+           ("output.packing", "the packing record is not yet periodic (the cell's records have porosity and "
+                              "coordination)"),
+           ("output.contacts", "the contact record is not yet periodic"))
+
+
+def _present(node, key):
+    value = node
+    for part in key.split("."):
+        value = value.get(part) if hasattr(value, "get") else None
+        if value is None:
+            return None
+    return value if (value or value == 0) and value != () else None
+
+
+def check(node, report):
+    """The keys a periodic cell cannot run with, each refused with its reason."""
+    if node.get("periodic") is None:
+        return
+    for key, why in REFUSED:
+        value = _present(node, key)
+        if value is not None:
+            report(key, f"is refused with periodic: {why}", value if not hasattr(value, "keys") else None)
+
+
+def check_scene(node, case, scene, report):
+    """A periodic cell is for 3D scenes of single spheres: clumps and polyhedra are refused
+    (``scene``: what the earlier stages' outputs hold)."""
+    if node.get("periodic") is None:
+        return
+    if case.dimension != 3:
+        report("periodic", "is for 3D cases", None)
+    if has_field(scene, "polyhedra/shape") or scene.get("clumps", False):
+        report("periodic", "is for spheres-only scenes (not clumps or polyhedra yet)", None)
+
+
+def attach(ctx, cfg, system, groups, resume):
+    """Give ``system`` the stage's cell (:func:`demcli.engine.periodic_cell.stage_cell`), its
+    positions moved into it; an input error when the scene is not single spheres or the cell is
+    too small for the minimum image."""
+    import numpy as np
+
+    from demcli.engine.periodic_cell import reach_problem, stage_cell
+    from demcli.kernels import layout as K
+
+    if system.flags[K.F_CLUMPS] or system.plugin.name != "spheres":
+        raise InputError(f"stage {ctx.name}: periodic: is for spheres-only scenes (not clumps or polyhedra yet)")
+    cell, shift = stage_cell(cfg.periodic, groups, system.x, system.rad, resume)
+    if np.any(shift != 0.0):
+        system.x += shift
+    problem = reach_problem(cell, system.rad, system.skin)
+    if problem:
+        raise InputError(f"stage {ctx.name}: periodic: {problem}")
+    system.cell = cell
+    lengths = ", ".join(f"{v * 1e3:.4g}" for v in cell[K.C_L:K.C_L + 3])
+    ctx.log(f"periodic cell {lengths} mm")
+
+
+def hooks():
+    """The record columns of a periodic stage (:data:`demcli.engine.periodic_cell.COLUMNS`)."""
+    from demcli.engine.periodic_cell import COLUMNS, record_row
+    from demcli.stages.loop import Hooks
+
+    def row(system):
+        return record_row(system.cell, system.rad, int(system.nl.act.sum()))
+
+    return Hooks(columns=dict(COLUMNS), row=row)
