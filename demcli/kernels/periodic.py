@@ -123,7 +123,7 @@ def _window(c, n, cell):
     if _none(cell):
         return lambda c, n, cell: (max(c - 1, 0), min(c + 2, n))
     def wrapped(c, n, cell):
-        big = 1 if n >= 3 else 0  # as arithmetic: an inlined conditional tuple confuses numba's IR checks
+        big = min(n // 3, 1)  # 1 when n >= 3: arithmetic, an inlined conditional trips numba's IR checks
         return big * (c - 1), big * (c + 2) + (1 - big) * n
     return wrapped
 

@@ -52,7 +52,9 @@ def _present(node, key):
         value = value.get(part) if hasattr(value, "get") else None
         if value is None:
             return None
-    return value if (value or value == 0) and value != () else None
+    if value is False or (hasattr(value, "__len__") and len(value) == 0):
+        return None  # off, or an empty list or section
+    return value
 
 
 def check(node, report):
@@ -66,13 +68,13 @@ def check(node, report):
 
 
 def check_scene(node, case, scene, report):
-    """A periodic cell is for 3D scenes of single spheres: clumps and polyhedra are refused
-    (``scene``: what the earlier stages' outputs hold)."""
+    """A periodic cell is for 3D scenes of single spheres: polyhedra are refused here (``scene``:
+    the fields the earlier stages' outputs hold), clumps at the stage start (:func:`attach`)."""
     if node.get("periodic") is None:
         return
     if case.dimension != 3:
         report("periodic", "is for 3D cases", None)
-    if has_field(scene, "polyhedra/shape") or scene.get("clumps", False):
+    if has_field(scene, "polyhedra/shape"):  # clumps show in the state only: refused at the stage start
         report("periodic", "is for spheres-only scenes (not clumps or polyhedra yet)", None)
 
 
