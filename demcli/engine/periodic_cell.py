@@ -86,14 +86,45 @@ def groups(cell):
     return {"lengths": cell[P.C_L:P.C_L + 3].copy(), "state": cell.copy()}
 
 
-COLUMNS = {"cell_x": "m", "cell_y": "m", "cell_z": "m", "strain_x": "1", "strain_y": "1", "strain_z": "1",
-           "rate_x": "1/s", "rate_y": "1/s", "rate_z": "1/s",
-           "s_xx": "Pa", "s_yy": "Pa", "s_zz": "Pa", "s_xy": "Pa", "s_xz": "Pa", "s_yz": "Pa",
-           "p": "Pa", "q": "Pa", "volumetric_strain": "1", "porosity": "1", "coordination": "1"}
-"""Record columns of a periodic stage: cell edges, engineering strains (L - L0) / L0 (extension
-positive), strain rates, the Love-Weber stress (compression positive), p = tr(sigma) / 3,
-q = sqrt(3 J2) (= |sigma_zz - sigma_xx| under axisymmetric load), volumetric strain V / V0 - 1,
-porosity 1 - V_spheres / V and coordination 2 N_c / N (every sphere, rattlers included)."""
+_COLUMN_DOCS = (
+    ("cell_<a>", "Cell edge <a>", "m", "mm", 1e3, "edge length L_<a> of the periodic cell"),
+    ("strain_<a>", "Cell strain <a>", "1", "%", 100.0, "engineering strain L_<a> / L0_<a> - 1 from the stage start, "
+                                                         "extension positive"),
+    ("rate_<a>", "Strain rate <a>", "1/s", None, 1.0, "strain rate of the cell along <a> (servo or prescribed), "
+                                                      "extension positive"),
+    ("s_<a><a>", "Stress <a><a>", "Pa", "kPa", 1e-3, "Love-Weber normal stress of the cell, compression positive"),
+)
+COLUMNS = {}
+"""Record columns of a periodic stage (``dem`` table, beside its coordination 2 N_c / N): cell
+edges, engineering strains (L - L0) / L0 (extension positive), strain rates, the Love-Weber
+stress (compression positive), p = tr(sigma) / 3, q = sqrt(3 J2) (= |sigma_zz - sigma_xx| under
+axisymmetric load), volumetric strain V / V0 - 1 and porosity 1 - V_spheres / V."""
+
+
+def _describe():
+    from demcli.state.records import describe_column
+
+    for name, label, unit, display, scale, doc in _COLUMN_DOCS:
+        for a in "xyz":
+            sub = name.replace("<a>", a)
+            COLUMNS[sub] = unit
+            describe_column(sub, label.replace("<a>", a), unit, display, scale, table="dem", doc=doc.replace("<a>", a))
+    for name, label in (("s_xy", "Stress xy"), ("s_xz", "Stress xz"), ("s_yz", "Stress yz")):
+        COLUMNS[name] = "Pa"
+        describe_column(name, label, "Pa", "kPa", 1e-3, table="dem", doc="Love-Weber shear stress of the cell "
+                                                                        "(symmetric part)")
+    for name, label, unit, display, scale, doc in (
+            ("p", "Mean stress p", "Pa", "kPa", 1e-3, "p = (s_xx + s_yy + s_zz) / 3 of the periodic cell"),
+            ("q", "Deviator stress q", "Pa", "kPa", 1e-3, "q = sqrt(3 J2) of the cell's stress (= |s_zz - s_xx| "
+                                                         "when s_xx = s_yy)"),
+            ("volumetric_strain", "Volumetric strain", "1", "%", 100.0, "V / V0 - 1 of the periodic cell from the "
+                                                                        "stage start (dilation positive)"),
+            ("porosity", "Porosity", "1", None, 1.0, "1 - sphere volume / cell volume")):
+        COLUMNS[name] = unit
+        describe_column(name, label, unit, display, scale, table="dem", doc=doc)
+
+
+_describe()
 
 
 def deviator(s):
@@ -103,8 +134,8 @@ def deviator(s):
     return p, math.sqrt(3.0 * j2)
 
 
-def record_row(cell, rad, contacts):
-    """The COLUMNS of the cell now (``contacts``: touching sphere pairs)."""
+def record_row(cell, rad):
+    """The COLUMNS of the cell now."""
     lengths = cell[P.C_L:P.C_L + 3]
     l0 = cell[P.C_L0:P.C_L0 + 3]
     s = cell[P.C_STRESS:P.C_STRESS + 6]
@@ -115,6 +146,5 @@ def record_row(cell, rad, contacts):
     row.update({f"rate_{a}": float(cell[P.C_RATE + d]) for d, a in enumerate("xyz")})
     row.update({f"s_{k}": float(v) for k, v in zip(("xx", "yy", "zz", "xy", "xz", "yz"), s)})
     row.update(p=p, q=q, volumetric_strain=vol / float(np.prod(l0)) - 1.0,
-               porosity=1.0 - float(np.sum(4.0 / 3.0 * math.pi * rad ** 3)) / vol,
-               coordination=2.0 * contacts / max(len(rad), 1))
+               porosity=1.0 - float(np.sum(4.0 / 3.0 * math.pi * rad ** 3)) / vol)
     return row

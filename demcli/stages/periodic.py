@@ -106,6 +106,6 @@ def hooks():
     from demcli.stages.loop import Hooks
 
     def row(system):
-        return record_row(system.cell, system.rad, int(system.nl.act.sum()))
+        return record_row(system.cell, system.rad)
 
     return Hooks(columns=dict(COLUMNS), row=row)

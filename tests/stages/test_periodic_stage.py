@@ -16,12 +16,13 @@ SMOKE = Path(__file__).resolve().parents[2] / "cases" / "smoke" / "periodic_tria
 
 
 def _rows(path):
+    """Rows of a record CSV keyed by column name (headers are ``name[unit]``)."""
     with open(path) as f:
-        return list(csv.DictReader(f))
+        return [{k.split("[")[0]: v for k, v in row.items()} for row in csv.DictReader(f)]
 
 
 def _records(out, stage):
-    found = sorted(Path(out).rglob(f"{stage}.csv"))
+    found = sorted(Path(out).rglob(f"{stage}_dem.csv"))
     assert found, list(Path(out).rglob("*.csv"))
     return _rows(found[0])
 
@@ -40,13 +41,15 @@ def test_smoke_case_compresses_then_shears_the_cell(smoke_run, h5_datasets):
     shear = _records(out, "shear")
     # Then every periodic record has the cell's columns
     assert set(COLUMNS) <= set(comp[0]) and set(COLUMNS) <= set(shear[0])
-    # the servo closed the loose cell (no contact carried load: every axis at -max_rate) until the
-    # spheres touched and the pressure rose
+    # the servo closed the loose cell at -max_rate (no contact carried load) until the spheres
+    # touched, then held each normal stress at its target (100 kPa within 1 %)
+    assert float(comp[1]["rate_x"]) == -20.0 and float(comp[0]["contacts"]) == 0
     last = comp[-1]
     for a in "xyz":
-        assert float(last[f"strain_{a}"]) < -0.2
-    assert float(last["p"]) > 1e3 and float(last["coordination"]) > 2.0
-    assert float(last["porosity"]) < float(comp[0]["porosity"])
+        assert float(last[f"strain_{a}"]) < -0.15
+        assert float(last[f"s_{a}{a}"]) == pytest.approx(1e5, rel=0.01)
+    assert float(last["p"]) == pytest.approx(1e5, rel=0.01) and float(last["coordination"]) > 4.0
+    assert float(last["porosity"]) < float(comp[0]["porosity"]) - 0.2
     # the shear stage shortened z at its rate (-1 1/s) from the compressed cell
     t = float(shear[-1]["time"]) - float(shear[0]["time"])
     assert float(shear[-1]["strain_z"]) == pytest.approx(np.expm1(-1.0 * t), rel=1e-3)
@@ -57,10 +60,26 @@ def test_smoke_case_compresses_then_shears_the_cell(smoke_run, h5_datasets):
     assert np.all(st["bodies/x"] > -0.5 * lengths) and np.all(st["bodies/x"] < 1.5 * lengths)
 
 
-def test_interrupted_periodic_stage_resumes_bit_identically(smoke_run, tmp_path, interrupt_and_resume, h5_differences):
+def test_interrupted_periodic_stage_resumes_bit_identically(smoke_run, tmp_path, monkeypatch, h5_differences):
+    from demcli.errors import StageError
+    from demcli.kernels import layout as K
+
     out, res = smoke_run
-    # When the same case is interrupted in its shear stage and resumed
-    interrupt_and_resume(System, 1500 + 200, SMOKE, tmp_path / "run", "02-shear.ckpt.h5")
+    real = System.advance
+
+    def interrupted(self, n):  # Ctrl-C in the shear stage (its z axis strain-controlled) at step 200
+        if self.cell[K.C_MODE + 2] == K.RATE and self.step >= 200:
+            raise KeyboardInterrupt
+        return real(self, n)
+
+    # When the same case is interrupted in its shear stage
+    monkeypatch.setattr(System, "advance", interrupted)
+    with pytest.raises(StageError, match="interrupted"):
+        run_case(SMOKE, out=tmp_path / "run", quiet=True, threads=1)
+    assert (tmp_path / "run" / "02-shear.ckpt.h5").exists()
+    # and resumed
+    monkeypatch.setattr(System, "advance", real)
+    run_case(SMOKE, out=tmp_path / "run", quiet=True, resume=True, threads=1)
     # Then its final state equals the uninterrupted one bit for bit (cell included)
     for name in ("01-compress.h5", "02-shear.h5"):
         assert h5_differences(out / name, tmp_path / "run" / name) == []
