@@ -7,6 +7,7 @@ chains, the packing and contact records) are refused with it.
 """
 
 from demcli.config.schema import Float, Optional, Section, Tagged, Vector
+from demcli.engine import periodic_cell  # registers the cell's state group and record columns
 from demcli.errors import InputError
 from demcli.stages.base import has_field
 
@@ -84,15 +85,14 @@ def attach(ctx, cfg, system, groups, resume):
     too small for the minimum image."""
     import numpy as np
 
-    from demcli.engine.periodic_cell import reach_problem, stage_cell
     from demcli.kernels import layout as K
 
     if system.flags[K.F_CLUMPS] or system.plugin.name != "spheres":
         raise InputError(f"stage {ctx.name}: periodic: is for spheres-only scenes (not clumps or polyhedra yet)")
-    cell, shift = stage_cell(cfg.periodic, groups, system.x, system.rad, resume)
+    cell, shift = periodic_cell.stage_cell(cfg.periodic, groups, system.x, system.rad, resume)
     if np.any(shift != 0.0):
         system.x += shift
-    problem = reach_problem(cell, system.rad, system.skin)
+    problem = periodic_cell.reach_problem(cell, system.rad, system.skin)
     if problem:
         raise InputError(f"stage {ctx.name}: periodic: {problem}")
     system.cell = cell
@@ -101,11 +101,14 @@ def attach(ctx, cfg, system, groups, resume):
 
 
 def hooks():
-    """The record columns of a periodic stage (:data:`demcli.engine.periodic_cell.COLUMNS`)."""
-    from demcli.engine.periodic_cell import COLUMNS, record_row
+    """The record columns of a periodic stage (:data:`demcli.engine.periodic_cell.COLUMNS`), and its
+    stop when the cell has become too small for the minimum image."""
     from demcli.stages.loop import Hooks
 
     def row(system):
-        return record_row(system.cell, system.rad)
+        return periodic_cell.record_row(system.cell, system.rad)
 
-    return Hooks(columns=dict(COLUMNS), row=row)
+    def stop(system, row):  # the minimum image holds while every edge exceeds 2 (2 r_max + skin)
+        return periodic_cell.reach_problem(system.cell, system.rad, system.skin)
+
+    return Hooks(columns=dict(periodic_cell.COLUMNS), row=row, stop=stop)
