@@ -101,8 +101,9 @@ def attach(ctx, cfg, system, groups, resume):
 
 
 def hooks():
-    """The record columns of a periodic stage (:data:`demcli.engine.periodic_cell.COLUMNS`), and its
-    stop when the cell has become too small for the minimum image."""
+    """The record columns of a periodic stage (:data:`demcli.engine.periodic_cell.COLUMNS`), its
+    stop when the cell has become too small for the minimum image, and its figures
+    (``records/<stage>_dem_stress.png``, ``..._strain.png``: against the z strain)."""
     from demcli.stages.loop import Hooks
 
     def row(system):
@@ -111,4 +112,8 @@ def hooks():
     def stop(system, row):  # the minimum image holds while every edge exceeds 2 (2 r_max + skin)
         return periodic_cell.reach_problem(system.cell, system.rad, system.skin)
 
-    return Hooks(columns=dict(periodic_cell.COLUMNS), row=row, stop=stop)
+    def finish(ctx, system, state, table):  # the cell's stresses and volume against the axial (z) strain
+        ctx.write_records(table, x="strain_z", ys=["p", "q", "s_xx", "s_yy", "s_zz"], suffix="stress")
+        ctx.write_records(table, x="strain_z", ys=["volumetric_strain", "strain_x", "strain_y"], suffix="strain")
+
+    return Hooks(columns=dict(periodic_cell.COLUMNS), row=row, stop=stop, finish=finish)

@@ -49,6 +49,34 @@ def test_simple_cubic_lattice_pressure_is_analytic(lattice):
     assert np.abs(s.f).max() <= 1e-9 * kn * delta
 
 
+def test_affinely_compressed_lattice_follows_the_spring_and_the_mean_flow_dashpot(build):
+    # Given the simple cubic lattice with linear springs k_n and an absolute dashpot c_n, the cell
+    # compressed at a constant strain rate edot < 0 on every axis (no servo)
+    a0, r, kn, cn, edot = 0.01, 0.5 * (0.01 + 1e-5), 1e5, 2.0, -5.0
+    counts = (3, 4, 5)
+    g = [np.arange(n) * a0 + 0.5 * a0 for n in counts]
+    x = np.array(list(itertools.product(*g)))
+    mats = [build.Material("m", 2500.0)]
+    s = build.sphere_system(x, np.zeros_like(x), r, mats, build.ContactModel(law="linear", kn=kn, cn=cn),
+                            dt_factor=0.1)
+    s.cell = make_cell(np.array(counts, float) * a0, rate=(edot,) * 3)
+    # When it is stepped (by symmetry every sphere follows the mean flow: its fluctuation stays 0)
+    n = 300
+    s.advance(n)
+    # Then the cell shrank by (1 + edot dt)^n, and the pressure is that of the lattice at the new
+    # spacing a: each contact carries k_n (2 r - a) from the spring plus c_n (-edot a) from the
+    # dashpot, the relative velocity of the mean flow across its branch: p = (k_n (2 r - a) - c_n edot a) / a^2
+    scale = (1.0 + edot * s.dt) ** n
+    lengths = s.cell[K.C_L:K.C_L + 3]
+    np.testing.assert_allclose(lengths, np.array(counts) * a0 * scale, rtol=1e-12)
+    a = a0 * scale
+    p_exact = (kn * (2 * r - a) - cn * edot * a) / a ** 2
+    sig = _stress(s)
+    np.testing.assert_allclose(sig[:3], p_exact, rtol=1e-9)
+    assert cn * -edot * a > 1e-4 * kn * (2 * r - a)  # without the mean-flow dashpot p would be off by > 1e-4
+    assert np.abs(s.v).max() <= 1e-9 * -edot * a
+
+
 def _pair(build, x, v, cell_lengths):
     B = build
     mats = [B.Material("m", 2500.0, friction=0.5, restitution=0.5)]

@@ -54,6 +54,10 @@ def test_smoke_case_compresses_then_shears_the_cell(smoke_run, h5_datasets):
     t = float(shear[-1]["time"]) - float(shear[0]["time"])
     assert float(shear[-1]["strain_z"]) == pytest.approx(np.expm1(-1.0 * t), rel=1e-3)
     assert float(shear[0]["cell_z"]) == pytest.approx(float(comp[-1]["cell_z"]), rel=1e-12)
+    # with the cell's figures beside the CSVs
+    for stage in ("compress", "shear"):
+        for fig in ("stress", "strain"):
+            assert (out / "records" / f"{stage}_dem_{fig}.png").stat().st_size > 0
     # and the states keep the cell, every sphere inside it to within half a skin
     st = h5_datasets(res[-1].path)
     lengths = st["cell/lengths"]
