@@ -111,3 +111,18 @@ def test_bad_periodic_config_exits_2_naming_key_rule_and_value(tmp_path, old, ne
     assert "Traceback" not in result.output
     for needle in needles:
         assert needle in result.output, (needle, result.output)
+
+
+def test_clumps_in_a_periodic_cell_are_refused_at_the_stage_start(tmp_path):
+    # Given the smoke case with clumps drawn (the state alone shows them: demcli check passes)
+    text = SMOKE.read_text().replace("count: 300", "count: 50").replace("    material: glass\n  - name: compress",
+                                     "    material: glass\n    clump: {spheres: [[-0.5, 0, 0, 0.6], [0.5, 0, 0, 0.6]]}\n"
+                                     "  - name: compress", 1)
+    case = tmp_path / "case.yaml"
+    case.write_text(text)
+    assert CliRunner().invoke(cli, ["check", str(case)]).exit_code == 0
+    # When it runs, then the periodic stage stops at its start with exit 2, naming the rule
+    result = CliRunner().invoke(cli, ["run", str(case), "--out", str(tmp_path / "run"), "--quiet"])
+    assert result.exit_code == 2, result.output
+    assert "Traceback" not in result.output
+    assert "periodic: is for spheres-only scenes (not clumps or polyhedra yet)" in result.output, result.output
