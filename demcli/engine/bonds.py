@@ -212,7 +212,7 @@ class BondSet:
         and the bond takes over the contact's force k_n delta (locked-in stress)."""
         from demcli.kernels.neighbors import build_pairs
 
-        start, pi, pj = build_pairs(xs, rad, sbody, float(gap), max(64, 8 * len(rad)))
+        start, pi, pj = build_pairs(xs, rad, sbody, float(gap), max(64, 8 * len(rad)), None)
         d = np.linalg.norm(xs[pi] - xs[pj], axis=1)
         delta = rad[pi] + rad[pj] - d
         lookup = {tuple(p): k for k, p in enumerate(self.materials.tolist())}

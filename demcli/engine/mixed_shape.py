@@ -121,7 +121,7 @@ class MixedShape:
         from demcli.kernels.shapes.spheres import SphereGeometry
 
         vs, verts, fs, fvs, fv, fn, fo = s.shapes
-        return MixedGeometry(SphereGeometry(s.xs, s.vs, s.ws, s.rad, s.smat, s.smass, s.sbody, s.soff),
+        return MixedGeometry(SphereGeometry(s.xs, s.vs, s.ws, s.rad, s.smat, s.smass, s.sbody, s.soff, None),
                              PolyGeometry(s.rad, s.smat, s.shape, vs, verts, fs, fvs, fv, fn, fo, s.bvstart,
                                           s.bfstart, *s.world), s.ns, s.qprm)
 

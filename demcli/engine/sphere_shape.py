@@ -121,7 +121,7 @@ class SphereShape:
     def geometry(s):
         from demcli.kernels.shapes.spheres import SphereGeometry
 
-        return SphereGeometry(s.xs, s.vs, s.ws, s.rad, s.smat, s.smass, s.sbody, s.soff)
+        return SphereGeometry(s.xs, s.vs, s.ws, s.rad, s.smat, s.smass, s.sbody, s.soff, s.cell)
 
     @staticmethod
     def members(s):
@@ -183,7 +183,7 @@ class SphereShape:
                                       s.prm, s.law, friction, rolling)) if len(bd) else 0.0
         return eb + float(total_strain_energy(nl.pi, nl.pj, s.xs, s.rad, s.smat, s.prm, s.law, nl.ft, nl.mr,
                                               friction, rolling, nl.wstart, nl.wwall, w.kind, s.wpoint, w.normal,
-                                              w.radius, s.wmat, nl.wft, nl.wmr, s.wmesh))
+                                              w.radius, s.wmat, nl.wft, nl.wmr, s.wmesh, s.cell))
 
     @staticmethod
     def contact_count(s):

@@ -179,6 +179,7 @@ class System:
         self.flags = tuple(flags)
         self.contact_damping = self.flags[K.F_DASHPOT]
         self.adaptive_damping = self.flags[K.F_ADAPTIVE]
+        self.cell = None  # the periodic cell (demcli.engine.periodic_cell), set by its stage before stepping
         b = groups["bodies"]
         self.body_id = np.ascontiguousarray(b["id"], np.int64)
         self.x = np.ascontiguousarray(b["x"], np.float64).copy()
@@ -446,6 +447,10 @@ class System:
         if self.adaptive_damping:
             out["adaptive_damping"] = {"alpha": np.float64(self.adamp[M.A_ALPHA]),
                                        "ke_prev": np.float64(self.adamp[M.A_KE])}
+        if self.cell is not None:
+            from demcli.engine.periodic_cell import groups as cell_groups
+
+            out["cell"] = cell_groups(self.cell)
         return out
 
     # ---- sphere scenes (bonds, measures on spheres) -----------------------------------

@@ -39,6 +39,7 @@ from demcli.kernels.layout import (BAD_ENERGY, BAD_NUMBER, BAD_OVERLAP, C_BODY, 
                                    F_CLUMPS, F_ENERGY, F_FRICTION, F_GRAVITY, F_LOCAL, F_PLANAR, F_ROLLING,
                                    F_VISCOUS, OK)
 from demcli.kernels.neighbors import add_actor_pairs, build_pairs, build_reverse, build_wall_pairs, carry_history
+from demcli.kernels.periodic import cell_of, control, deform, wrap
 from demcli.kernels.shapes import pair_pass, place, primitives, spin_rotors, volumetric, wall_pass, worst_overlap
 from demcli.kernels.switch import choose, on
 
@@ -64,12 +65,14 @@ def rebuild_lists(g, bd, nl, par, flags, wa, bonds, bprm, vol, pair_torque):
     ns = xs.shape[0]
     nsmall = par.nsmall
     skin = par.skin
+    cell = cell_of(g)  # None without a periodic cell (kernels/periodic.py)
+    wrap(cell, xs)  # periodic spheres are their bodies: xs is bd.x
     if nsmall < ns:  # actors: the particles alone through the cell grid (contiguous copies)
         nstart, npi, npj = build_pairs(xs[:nsmall].copy(), rad[:nsmall].copy(), prim_body[:nsmall].copy(), skin,
-                                       par.max_cells)
+                                       par.max_cells, cell)
         nstart, npi, npj = add_actor_pairs(nstart, npj, xs, rad, prim_body, nsmall, skin)
     else:
-        nstart, npi, npj = build_pairs(xs, rad, prim_body, skin, par.max_cells)
+        nstart, npi, npj = build_pairs(xs, rad, prim_body, skin, par.max_cells, cell)
     if bonds is not None:  # None (no bond code compiled) for polyhedra and mixed scenes
         if flags[F_BONDS]:
             nstart, npi, npj = unbonded_pairs(bonds, bprm, nstart, npi, npj)
@@ -340,6 +343,7 @@ def run_steps(nsteps, time, flags, prm, par, bd, g, mb, wa, nl, bonds, bprm, ada
     adaptive = on(static, F_ADAPTIVE)
     planar = on(static, F_PLANAR)
     vol = volumetric(g)
+    cell = cell_of(g)
     Lr = M.rotors(spin_rotors(g, mb, nl.xref), bd.L)  # None for spin rotors: the rotor switch
     rigid = Lr is not None
     rotate_body = friction or rolling or bonded or rigid
@@ -377,6 +381,8 @@ def run_steps(nsteps, time, flags, prm, par, bd, g, mb, wa, nl, bonds, bprm, ada
             M.kick_drift(bd.x, bd.v, bd.w, bd.q, Lr, bd.f, bd.tq, bd.mass, bd.inert, bd.flags, dt, alpha,
                          rotate_body, static, choose(mb, nl.xref, None), lim2, rebuild, eabs)
             counters[C_KICK] += 1
+        if not prime:
+            deform(cell, bd.x, nl.xref, dt, lim2, rebuild)  # periodic cell: affine remap; else nothing
         place(g, bd, flags, nl.xref, lim2, rebuild)
         if clumps:
             counters[C_MEMBERS] += 1
@@ -390,6 +396,7 @@ def run_steps(nsteps, time, flags, prm, par, bd, g, mb, wa, nl, bonds, bprm, ada
             counters[C_REBUILD] += 1
         fuse_next = body_prims and not rigid and not adaptive and not prime and n + 1 < nsteps
         pair_pass(g, bd, nl, prm, par.law, flags, h, frow, trow, erow, bonds, bprm, broke)
+        control(cell, g, nl, bd, prm, par.law, h)  # periodic cell: stress and servo; else nothing
         counters[C_PAIRS] += 1
         if bonded:
             if broke[0]:

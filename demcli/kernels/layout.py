@@ -70,3 +70,16 @@ list build), wref (wall displacement since). Arrays of inactive effects have zer
 Members = namedtuple("Members", "mstart mlist xs fs ts")
 """Clumps: mstart (n_b + 1,), mlist (n_s,) the member spheres of each body; xs their positions, fs, ts
 their loads (n_s, 3). Zero rows (mstart of length 1) when the bodies are their own primitives."""
+
+# slots of a periodic cell's array (demcli/kernels/periodic.py; docs/periodic.md)
+C_L = 0          # (3) edge lengths L_d [m]
+C_RATE = 3       # (3) strain rates edot_d [1/s] (extension positive)
+C_MODE = 6       # (3) RATE: the rate is prescribed (C_TARGET); STRESS: servo to the stress C_TARGET
+C_TARGET = 9     # (3) prescribed rate [1/s] or target stress [Pa] (compression positive)
+C_GAIN = 12      # beta: share of the stress error the servo closes per step (affine estimate)
+C_MAX_RATE = 13  # edot_max [1/s]
+C_STRESS = 14    # (6) xx yy zz xy xz yz [Pa], compression positive, measured at the last step
+C_STIFF = 20     # (3) affine stiffness K_d [Pa]
+C_L0 = 23        # (3) lengths at the stage start [m] (strains are measured from them)
+N_CELL = 26
+RATE, STRESS = 0, 1

@@ -17,12 +17,14 @@ import numpy as np
 from numba import prange
 
 from demcli.jit import njit
+from demcli.kernels.periodic import grid_cells, grid_origin, min_image, window, wrap_index
 from demcli.kernels.walls import surface_distance, wall_distance
 
 
 @njit
-def _grid(xs, rad, skin, max_cells):
-    """Bounds and cell counts of a grid whose cells are at least 2 r_max + skin wide."""
+def _grid(xs, rad, skin, max_cells, cell):
+    """Bounds and cell counts of a grid whose cells are at least 2 r_max + skin wide (over the
+    points' box, or over the periodic ``cell``: :mod:`demcli.kernels.periodic`)."""
     n = xs.shape[0]
     lo = np.empty(3)
     hi = np.empty(3)
@@ -44,18 +46,18 @@ def _grid(xs, rad, skin, max_cells):
         if lo[d] > hi[d]:
             lo[d] = 0.0
             hi[d] = 0.0
+    grid_origin(cell, lo)
     h = 2.0 * rmax + skin
     nc = np.empty(3, np.int64)
     while True:  # counts in floating point: far-flung or non-finite points cannot overflow them
         tot = 1.0
         for d in range(3):
-            span = (hi[d] - lo[d]) / h
-            tot *= (math.floor(span) + 1.0) if span < 1e18 else 1e18
+            tot *= grid_cells(cell, d, lo, hi, h)
         if tot <= max_cells:
             break
         h *= 1.26
     for d in range(3):
-        nc[d] = int(math.floor((hi[d] - lo[d]) / h)) + 1
+        nc[d] = int(grid_cells(cell, d, lo, hi, h))
     return lo, 1.0 / h, nc
 
 
@@ -100,8 +102,9 @@ def _bin(xs, lo, inv_h, nc):
 
 
 @njit(parallel=True, internal=True)
-def _scan_pairs(xs, rad, body, skin, lo, inv_h, nc, cell_start, items, start, pj, fill):
-    """Count (fill=False) or write (fill=True) the j > i neighbours of every sphere."""
+def _scan_pairs(xs, rad, body, skin, lo, inv_h, nc, cell_start, items, start, pj, fill, cell):
+    """Count (fill=False) or write (fill=True) the j > i neighbours of every sphere (minimum
+    image and wrapped neighbour cells in a periodic ``cell``)."""
     n = xs.shape[0]
     for i in prange(n):
         xi = xs[i, 0]
@@ -113,17 +116,20 @@ def _scan_pairs(xs, rad, body, skin, lo, inv_h, nc, cell_start, items, start, pj
         cy = _coord(yi, lo[1], inv_h, nc[1])
         cz = _coord(zi, lo[2], inv_h, nc[2])
         k = start[i] if fill else 0
-        for zz in range(max(cz - 1, 0), min(cz + 2, nc[2])):
-            for yy in range(max(cy - 1, 0), min(cy + 2, nc[1])):
-                for xx in range(max(cx - 1, 0), min(cx + 2, nc[0])):
-                    c = xx + nc[0] * (yy + nc[1] * zz)
+        z0, z1 = window(cz, nc[2], cell)
+        y0, y1 = window(cy, nc[1], cell)
+        x0, x1 = window(cx, nc[0], cell)
+        for zk in range(z0, z1):
+            zz = wrap_index(zk, nc[2], cell)
+            for yk in range(y0, y1):
+                yy = wrap_index(yk, nc[1], cell)
+                for xk in range(x0, x1):
+                    c = wrap_index(xk, nc[0], cell) + nc[0] * (yy + nc[1] * zz)
                     for a in range(cell_start[c], cell_start[c + 1]):
                         j = items[a]
                         if j <= i or body[j] == bi:
                             continue
-                        dx = xs[j, 0] - xi
-                        dy = xs[j, 1] - yi
-                        dz = xs[j, 2] - zi
+                        dx, dy, dz = min_image(cell, xs[j, 0] - xi, xs[j, 1] - yi, xs[j, 2] - zi)
                         cut = ri + rad[j]
                         if dx * dx + dy * dy + dz * dz < cut * cut:
                             if fill:
@@ -144,22 +150,24 @@ def _scan_pairs(xs, rad, body, skin, lo, inv_h, nc, cell_start, items, start, pj
 
 
 @njit
-def build_pairs(xs, rad, body, skin, max_cells):
-    """Verlet pair list: (start (n+1,), pi (P,), pj (P,)) in canonical order."""
+def build_pairs(xs, rad, body, skin, max_cells, cell):
+    """Verlet pair list: (start (n+1,), pi (P,), pj (P,)) in canonical order; ``cell``: the
+    periodic cell (positions in it, :mod:`demcli.kernels.periodic`) or None."""
     n = xs.shape[0]
     start = np.zeros(n + 1, np.int64)
     if n == 0:
         return start, np.empty(0, np.int64), np.empty(0, np.int64)
-    lo, inv_h, nc = _grid(xs, rad, skin, max_cells)
+    lo, inv_h, nc = _grid(xs, rad, skin, max_cells, cell)
     cell_start, items = _bin(xs, lo, inv_h, nc)
     dummy = np.empty(0, np.int64)
     # np.bool_: a typed flag, not a literal, so that both passes share one compiled scan
-    _scan_pairs(xs, rad, body, skin, lo, inv_h, nc, cell_start, items, start, dummy, np.bool_(False))
+    _scan_pairs(xs, rad, body, skin, lo, inv_h, nc, cell_start, items, start, dummy, np.bool_(False),
+                cell)
     for i in range(n):
         start[i + 1] += start[i]
     npair = start[n]
     pj = np.empty(npair, np.int64)
-    _scan_pairs(xs, rad, body, skin, lo, inv_h, nc, cell_start, items, start, pj, np.bool_(True))
+    _scan_pairs(xs, rad, body, skin, lo, inv_h, nc, cell_start, items, start, pj, np.bool_(True), cell)
     pi = np.empty(npair, np.int64)
     for i in range(n):
         for c in range(start[i], start[i + 1]):

@@ -14,6 +14,7 @@ from demcli.config.schema import Bool, Float, Int, List, Map, Optional, Section,
 from demcli.effects import EFFECTS, declared, physics_section, shape_refusals
 from demcli.errors import InputError, StateError
 from demcli.measure.regions import MEASURE, check_box as _check_box
+from demcli.stages import periodic
 from demcli.stages.base import ENGINE_KEEPS, ENGINE_OUTPUT, StageType, has_field, register_stage
 
 MOTION = Tagged("mode", {
@@ -281,6 +282,7 @@ def check_stage(node, report):
     if (t.duration is None) == (t.steps is None):
         report("time", "give exactly one of duration or steps", None)
     check_dynamics(node, report)
+    periodic.check(node, report)
 
 
 def check_dynamics(node, report):
@@ -348,6 +350,7 @@ def scene_check(cfg, case, k, scene, report, shapes=None):
     (:func:`demcli.effects.shape_refusals`)."""
     if scene is None:
         return
+    periodic.check_scene(cfg, case, scene, report)
     if shapes is None:
         shapes = ("polyhedra",) if has_field(scene, "polyhedra/shape") else ("spheres", "clumps")
     names = stage_effects(cfg, case.dimension, bonded=has_field(scene, "bonds/i"))
@@ -697,10 +700,10 @@ def mesh_digest(cfg, case_dir):
 
 
 def run(ctx, cfg, state_in):
-    """The ``dem`` stage: :func:`demcli.stages.loop.integrate` without hooks."""
+    """The ``dem`` stage: :func:`demcli.stages.loop.integrate`, with the cell's records when periodic."""
     from demcli.stages.loop import integrate
 
-    return integrate(ctx, cfg, state_in)
+    return integrate(ctx, cfg, state_in, periodic.hooks() if cfg.get("periodic") is not None else None)
 
 
 def plan_summary(ctx_case, cfg, scene):
@@ -712,7 +715,7 @@ def plan_summary(ctx_case, cfg, scene):
 
 
 register_stage(StageType(
-    "dem", FIELDS, run, needs_input=True, requires=("bodies/x", "spheres/radius"), check=check_stage,
+    "dem", {**FIELDS, "periodic": periodic.PERIODIC}, run, needs_input=True, requires=("bodies/x", "spheres/radius"), check=check_stage,
     orders_particles=True, provides=ENGINE_OUTPUT, keeps=ENGINE_KEEPS, config_requires=config_inputs,
     case_check=scene_check, file_digest=mesh_digest,
     plan=plan_summary, doc="integrate the motion with the declared physics"))

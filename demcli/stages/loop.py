@@ -84,6 +84,10 @@ def make_system(ctx, cfg, groups, time=0.0, step=0, resume=False):
             free = cfg.bonds.install == "stress_free" or (cfg.bonds.install == "auto" and cfg.bonds.from_phases)
             n = system.bond_touching(cfg.bonds.gap * float(system.rad.mean()), stress_free=free)
             ctx.log(f"bonded {n} touching pairs ({len(system.bonds)} bonds)")
+    if cfg.get("periodic") is not None:
+        from demcli.stages.periodic import attach
+
+        attach(ctx, cfg, system, groups, resume)
     dt_crit = system.critical_dt()
     dt = stage_time_step(cfg, dt_crit, f"stage {ctx.name}")
     system.dt = dt

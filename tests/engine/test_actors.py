@@ -102,7 +102,7 @@ def test_actor_pairs_equal_a_brute_force_search():
     x = rng.uniform(0, 0.6, (n + 2, 3))
     rad = np.r_[rng.uniform(0.005, 0.015, n), 0.3, 0.2]
     skin = 0.004
-    start, _, pj = build_pairs(x[:n], rad[:n], np.arange(n), skin, 10000)
+    start, _, pj = build_pairs(x[:n], rad[:n], np.arange(n), skin, 10000, None)
     # When: the actors are added to the particles' list
     st, pi, pj2 = add_actor_pairs(start, pj, x, rad, np.arange(len(x)), n, skin)
     # Then: the pairs are exactly those closer than the skin (bounding spheres), rows sorted by j

@@ -138,7 +138,7 @@ def test_broad_phase_with_one_big_sphere_finds_every_pair(scene):
             x = np.vstack([small, [[0.0, 0.0, 2 * r + R]]]) if big else small
             rad = np.array([r] * len(small) + ([R] if big else []))
             skin = 0.3 * rad.mean()
-            args = (x, rad, np.arange(len(x)), skin, max(64, 8 * len(x)))
+            args = (x, rad, np.arange(len(x)), skin, max(64, 8 * len(x)), None)
             build_pairs(*args)
             t0 = time.perf_counter()
             start, pi, pj = build_pairs(*args)

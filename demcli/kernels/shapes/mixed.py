@@ -186,7 +186,7 @@ def pair_pass(g, bd, nl, prm, law, flags, dt, frow, trow, erow, bonds, bprm, bro
     pg = g.poly
     ns = g.ns
     S._pair_forces(nl.start, nl.pj, sg.xs, sg.vs, sg.ws, sg.rad, sg.mat, sg.smass, prm, law, dt, nl.ft, nl.mr,
-                   friction, rolling, energy, nl.fc, nl.tj, nl.act, nl.epair, frow, trow, erow, ns)
+                   friction, rolling, energy, nl.fc, nl.tj, nl.act, nl.epair, frow, trow, erow, ns, None)
     if not (friction or rolling):
         trow[:ns, :] = 0.0
     _sphere_poly_forces(nl.start, nl.pj, ns, sg, pg, prm, law, dt, nl.ft, nl.mr, friction, rolling, energy, nl.fc,

@@ -24,13 +24,15 @@ from demcli.kernels.contact import (HERTZ, P_ARM, P_CN, P_ESTAR, P_KN, P_ZETA, c
                                    strain_energy)
 from demcli.kernels.layout import F_BONDS, F_CLUMPS, F_ENERGY, F_FRICTION, F_ROLLING
 from demcli.kernels.mesh import wall_features
+from demcli.kernels.periodic import mean_flow, min_image
 from demcli.kernels.switch import choose
 from demcli.kernels.walls import MESH, surface_distance, wall_distance
 
-SphereGeometry = namedtuple("SphereGeometry", "xs vs ws rad mat smass sbody soff")
+SphereGeometry = namedtuple("SphereGeometry", "xs vs ws rad mat smass sbody soff cell")
 """Spheres: xs, vs, ws (n_s, 3) position, velocity and spin of each sphere (for spheres-only
 scenes the body arrays: sphere i is body i); rad (n_s,) m; mat (n_s,) material; smass (n_s,) mass
-of the sphere's body; sbody (n_s,) its body; soff (n_s, 3) offset in the body frame."""
+of the sphere's body; sbody (n_s,) its body; soff (n_s, 3) offset in the body frame; cell: the
+periodic cell (:mod:`demcli.kernels.periodic`, spheres-only scenes) or None (compiled out)."""
 
 
 @njit(parallel=True)
@@ -57,7 +59,7 @@ def _place_members(x, v, w, q, xs, vs, ws, sbody, soff, xref, lim2, rebuild):
 
 @njit(parallel=True, internal=True)
 def _pair_forces(start, pj, xs, vs, ws, rad, smat, smass, prm, law, dt, ft, mr, friction, rolling,
-                 energy, fc, tj, act, epair, frow, trow, erow, split):
+                 energy, fc, tj, act, epair, frow, trow, erow, split, cell):
     """Force, torques and dissipation of every listed pair, each pair writing its own row.
 
     Walks the CSR rows (sphere i, then its j > i), so i's data is loaded once per row, and
@@ -65,6 +67,7 @@ def _pair_forces(start, pj, xs, vs, ws, rad, smat, smass, prm, law, dt, ft, mr, 
     gather then adds only the j sides. ``split``: None (every primitive a sphere), or the
     number of spheres of a mixed scene (:mod:`demcli.kernels.shapes.mixed`): rows and partners
     below it only, and every open pair drops its history (nothing is marked at a rebuild).
+    ``cell``: the periodic cell (minimum-image branch, mean flow in the relative velocity) or None.
     """
     nrow = start.shape[0] - 1
     if split is not None:
@@ -87,9 +90,7 @@ def _pair_forces(start, pj, xs, vs, ws, rad, smat, smass, prm, law, dt, ft, mr, 
             if split is not None:
                 if j >= split:
                     continue
-            dx = xi0 - xs[j, 0]
-            dy = xi1 - xs[j, 1]
-            dz = xi2 - xs[j, 2]
+            dx, dy, dz = min_image(cell, xi0 - xs[j, 0], xi1 - xs[j, 1], xi2 - xs[j, 2])
             rj = rad[j]
             rs = ri + rj
             d2 = dx * dx + dy * dy + dz * dz
@@ -118,6 +119,7 @@ def _pair_forces(start, pj, xs, vs, ws, rad, smat, smass, prm, law, dt, ft, mr, 
             ai = ri - arm
             aj = rj - arm
             vx, vy, vz, wx, wy, wz = pair_kinematics(vs, ws, i, j, nx, ny, nz, ai, aj)
+            vx, vy, vz = mean_flow(cell, vx, vy, vz, dx, dy, dz)
             mi = smass[i]
             mj = smass[j]
             fx, fy, fz, mx, my, mz, ed, ef = contact_law(
@@ -276,7 +278,7 @@ def pair_pass(g, bd, nl, prm, law, flags, dt, frow, trow, erow, bonds, bprm, bro
     rolling = flags[F_ROLLING]
     energy = flags[F_ENERGY]
     _pair_forces(nl.start, nl.pj, g.xs, g.vs, g.ws, g.rad, g.mat, g.smass, prm, law, dt, nl.ft, nl.mr, friction,
-                 rolling, energy, nl.fc, nl.tj, nl.act, nl.epair, frow, trow, erow, None)
+                 rolling, energy, nl.fc, nl.tj, nl.act, nl.epair, frow, trow, erow, None, g.cell)
     if flags[F_BONDS]:
         bond_forces(bonds, bprm, g.xs, g.vs, g.ws, g.rad, g.mat, g.smass, prm, law, dt, friction, rolling, energy,
                     frow, trow, erow, broke)
@@ -341,7 +343,8 @@ def worst_overlap(g, nl, wa):
         if act[c]:
             i = pi[c]
             j = pj[c]
-            d = math.sqrt((xs[i, 0] - xs[j, 0]) ** 2 + (xs[i, 1] - xs[j, 1]) ** 2 + (xs[i, 2] - xs[j, 2]) ** 2)
+            dx, dy, dz = min_image(g.cell, xs[i, 0] - xs[j, 0], xs[i, 1] - xs[j, 1], xs[i, 2] - xs[j, 2])
+            d = math.sqrt(dx ** 2 + dy ** 2 + dz ** 2)
             ratio = (rad[i] + rad[j] - d) / min(rad[i], rad[j])
             if ratio > worst:
                 worst = ratio
@@ -363,13 +366,14 @@ def worst_overlap(g, nl, wa):
 
 @njit
 def total_strain_energy(pi, pj, xs, rad, smat, prm, law, ft, mr, friction, rolling,
-                        wstart, wwall, wkind, wpoint, wnormal, wradius, wmat, wft, wmr, mesh):
-    """Elastic energy in all contacts [J] (serial, fixed order)."""
+                        wstart, wwall, wkind, wpoint, wnormal, wradius, wmat, wft, wmr, mesh, cell):
+    """Elastic energy in all contacts [J] (serial, fixed order; ``cell``: periodic cell or None)."""
     e = 0.0
     for c in range(pi.shape[0]):
         i = pi[c]
         j = pj[c]
-        d = math.sqrt((xs[i, 0] - xs[j, 0]) ** 2 + (xs[i, 1] - xs[j, 1]) ** 2 + (xs[i, 2] - xs[j, 2]) ** 2)
+        dx, dy, dz = min_image(cell, xs[i, 0] - xs[j, 0], xs[i, 1] - xs[j, 1], xs[i, 2] - xs[j, 2])
+        d = math.sqrt(dx ** 2 + dy ** 2 + dz ** 2)
         delta = rad[i] + rad[j] - d
         if delta > 0.0:
             e += strain_energy(law, prm, smat[i], smat[j], delta, rad[i] * rad[j] / (rad[i] + rad[j]),
