@@ -1,0 +1,124 @@
+"""Polyhedra against mesh walls in the engine (demcli.kernels.poly_mesh, the mesh path of
+demcli.kernels.shapes.polyhedra._wall_forces): on a flat mesh of many triangles a falling and
+bouncing body follows the plane wall's trajectory to round-off, a body at rest on it carries its
+weight, and the results do not depend on the thread count."""
+
+import numpy as np
+import pytest
+
+from demcli.engine.materials import ContactModel, Material
+from demcli.engine.plan import make_plan
+from demcli.engine.poly_shape import polyhedra_groups
+from demcli.engine.system import Dynamics, System, Walls
+from demcli.geometry import convex_hull
+from demcli.kernels.walls import MESH, N_WPARAMS
+
+G = 9.81
+RHO = 2600.0
+
+
+def hull(seed, size, n=20):
+    """Hull of n random points in an ellipsoid of semi-axes ``size`` [m] (a stone)."""
+    rng = np.random.default_rng(seed)
+    d = rng.normal(size=(n, 3))
+    d /= np.linalg.norm(d, axis=1)[:, None]
+    return convex_hull(d * np.cbrt(rng.uniform(0.3, 1.0, n))[:, None] * np.asarray(size))
+
+
+def cube(a):
+    return convex_hull(np.array([[i, j, k] for i in (0, a) for j in (0, a) for k in (0, a)], float) - a / 2)
+
+
+def floor_mesh(n=4, size=0.05, seed=2):
+    """Flat mesh z = 0 over [-n size / 2, n size / 2]^2: n x n squares in two triangles each,
+    inner vertices jittered in the plane (triangles of many shapes and angles)."""
+    xs = (np.arange(n + 1) - n / 2) * size
+    gx, gy = np.meshgrid(xs, xs, indexing="ij")
+    verts = np.column_stack([gx.ravel(), gy.ravel(), np.zeros(gx.size)])
+    inner = (np.abs(gx.ravel()) < xs[-1]) & (np.abs(gy.ravel()) < xs[-1])
+    verts[inner, :2] += np.random.default_rng(seed).uniform(-0.2, 0.2, (inner.sum(), 2)) * size
+    tris = []
+    for i in range(n):
+        for j in range(n):
+            a, b, c, d = i * (n + 1) + j, (i + 1) * (n + 1) + j, (i + 1) * (n + 1) + j + 1, i * (n + 1) + j + 1
+            tris += [(a, b, c), (a, c, d)] if (i + j) % 2 else [(a, b, d), (b, c, d)]
+    return verts, np.array(tris, np.int64)
+
+
+def mesh_walls(verts, tris):
+    """One fixed mesh wall, its point the first vertex (as the case reader places it)."""
+    p = verts[0].copy()
+    return Walls(name=["floor"], kind=np.array([MESH], np.int8), point=p[None], normal=np.array([[0.0, 0.0, 1.0]]),
+                 radius=np.zeros(1), v=np.zeros((1, 3)), material=np.zeros(1, np.int64), control=np.zeros(1, np.int8),
+                 prm=np.zeros((1, N_WPARAMS)), extent=np.array([[-1.0, -1.0, -1.0, 1.0, 1.0, 1.0]]),
+                 mesh=[(verts - p, tris)])
+
+
+def system(polys, x, q, v, omega, walls, effects=("gravity", "friction"), dt=None, local_damping=0.0):
+    groups = polyhedra_groups(polys, RHO, x=x, q=q, v=v, omega=omega)
+    mats = [Material("rock", RHO, young=1e8, friction=0.5, restitution=0.5)]
+    s = System(groups, mats, ContactModel(), make_plan(list(effects), walls=True), walls,
+               Dynamics(gravity=(0.0, 0.0, -G), local_damping=local_damping), dt=1.0)
+    s.dt = 0.1 * s.critical_dt() if dt is None else dt
+    return s
+
+
+def scene(walls, dt=None):
+    """A cube and a stone, thrown turning onto the floor from a few mm, across triangle edges."""
+    polys = [cube(0.02), hull(4, (0.015, 0.012, 0.009))]
+    x = np.array([[-0.031, 0.012, 0.0135], [0.024, -0.018, 0.0125]])
+    q = np.array([[0.97, 0.1, -0.2, 0.1], [0.8, 0.3, 0.5, -0.1]])
+    q /= np.linalg.norm(q, axis=1)[:, None]
+    v = np.array([[0.05, -0.02, -0.1], [-0.03, 0.04, 0.0]])
+    omega = np.array([[1.0, 3.0, -2.0], [-4.0, 2.0, 5.0]])
+    return system(polys, x, q, v, omega, walls, dt=dt)
+
+
+def test_bodies_bounce_on_a_flat_mesh_as_on_the_plane():
+    # Given the same two bodies dropped onto a plane and onto a flat mesh of 32 triangles (same dt)
+    verts, tris = floor_mesh()
+    plane = scene(Walls.fixed_planes([[0.0, 0.0, 0.0]], [[0.0, 0.0, 1.0]]))
+    mesh = scene(mesh_walls(verts, tris), dt=plane.dt)
+    # When both run 10000 steps (impacts, bounces, sliding across triangle edges)
+    touched = 0
+    for _ in range(20):
+        plane.advance(500)
+        mesh.advance(500)
+        touched += plane.contact_count()[1]
+        # Then the trajectories agree to round-off (measured: 2e-12 m and 4e-10 rad/s), and the
+        # walls' reactions too
+        np.testing.assert_allclose(mesh.x, plane.x, rtol=0, atol=1e-9)
+        np.testing.assert_allclose(mesh.w, plane.w, rtol=0, atol=1e-6)
+        np.testing.assert_allclose(mesh.wforce, plane.wforce, rtol=1e-6, atol=1e-9)
+    assert touched >= 20
+
+
+def test_a_body_at_rest_on_a_mesh_carries_its_weight():
+    # Given a cube set on the flat mesh across a triangle edge, damped to rest
+    verts, tris = floor_mesh()
+    s = system([cube(0.02)], np.array([[0.003, -0.004, 0.00999]]), np.array([[1.0, 0, 0, 0]]), np.zeros((1, 3)),
+               np.zeros((1, 3)), mesh_walls(verts, tris), effects=("gravity", "friction", "local_damping"), local_damping=0.4)
+    # When it settles
+    s.advance(20000)
+    # Then the mesh's reaction is its weight (measured: 1e-8 relative) and it has stopped
+    weight = s.mass[0] * G
+    assert abs(-s.wforce[0, 2] - weight) < 1e-6 * weight
+    assert np.abs(s.v).max() < 1e-6
+
+
+@pytest.mark.parametrize("threads", [2])
+def test_mesh_contacts_do_not_depend_on_the_thread_count(threads):
+    # Given the bouncing scene on the mesh, run on one thread and on two
+    from demcli.jit import set_threads
+
+    verts, tris = floor_mesh()
+    runs = []
+    for n in (1, threads):
+        set_threads(n)
+        s = scene(mesh_walls(verts, tris))
+        s.advance(3000)
+        runs.append((s.x.copy(), s.w.copy(), s.wforce.copy()))
+    set_threads(1)
+    # Then every bit is the same
+    for a, b in zip(*runs):
+        np.testing.assert_array_equal(a, b)
