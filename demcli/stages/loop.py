@@ -49,7 +49,7 @@ def make_system(ctx, cfg, groups, time=0.0, step=0, resume=False):
     """System, plan and time-step information for this stage (``resume``: from a checkpoint)."""
     from demcli.engine.plan import make_plan
     from demcli.engine.system import Dynamics, System
-    from demcli.kernels.walls import PLANE
+    from demcli.kernels.walls import MESH, PLANE
 
     walls = build_walls(cfg, ctx.case, ctx.runner.case_path, f"stages[{ctx.index}].walls")
     shape = scene_shape(groups)
@@ -59,7 +59,8 @@ def make_system(ctx, cfg, groups, time=0.0, step=0, resume=False):
                      bonds=bonded)
     # every effect on a shape it runs on (demcli check refuses the rest already, where it knows the shape)
     check_shape(plan.effects, shape, ctx.name)
-    if shape in ("polyhedra", "mixed") and np.any(np.asarray(walls.kind) != PLANE):
+    takes = (PLANE, MESH) if shape == "polyhedra" else (PLANE,)
+    if shape in ("polyhedra", "mixed") and np.any(np.isin(np.asarray(walls.kind), takes, invert=True)):
         raise InputError(f"stage {ctx.name}: walls: a scene with polyhedra takes {EFFECTS['walls'].limits[shape]}")
     p = cfg.physics
     dyn = Dynamics(gravity=tuple(p.gravity) if p.gravity is not None else (0.0, 0.0, 0.0),
