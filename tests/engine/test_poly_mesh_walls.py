@@ -1,7 +1,8 @@
 """Polyhedra against mesh walls in the engine (demcli.kernels.poly_mesh, the mesh path of
 demcli.kernels.shapes.polyhedra._wall_forces): on a flat mesh of many triangles a falling and
 bouncing body follows the plane wall's trajectory to round-off, a body at rest on it carries its
-weight, and the results do not depend on the thread count."""
+weight, a servo-driven mesh lid presses as the plane lid does, the results do not depend on the
+thread count, and the smoke case's stones come to rest on an STL floor that carries their weight."""
 
 from pathlib import Path
 
@@ -14,7 +15,7 @@ from demcli.engine.plan import make_plan
 from demcli.engine.poly_shape import polyhedra_groups
 from demcli.engine.system import Dynamics, System, Walls
 from demcli.geometry import convex_hull
-from demcli.kernels.walls import MESH, N_WPARAMS
+from demcli.kernels.walls import MESH, N_WPARAMS, PLANE, SERVO, W_AREA, W_GAIN, W_TARGET, W_VMAX
 
 G = 9.81
 RHO = 2600.0
@@ -129,6 +130,39 @@ def test_mesh_contacts_do_not_depend_on_the_thread_count(threads):
     # Then every bit is the same
     for a, b in zip(*runs):
         np.testing.assert_array_equal(a, b)
+
+
+def servo_scene(lid_kind):
+    """A 20 mm cube on a plane floor under a lid 0.1 mm above it (a plane or a flat mesh of 32
+    triangles facing down) that a servo drives to 2 kPa (0.8 N on the cube's 4 cm^2)."""
+    verts, tris = floor_mesh()
+    verts = verts + [0.004, -0.003, 0.0201]
+    walls = Walls(name=["floor", "lid"], kind=np.array([PLANE, lid_kind], np.int8),
+                  point=np.array([[0.0, 0.0, 0.0], verts[0]]), normal=np.array([[0.0, 0.0, 1.0], [0.0, 0.0, -1.0]]),
+                  radius=np.zeros(2), v=np.zeros((2, 3)), material=np.zeros(2, np.int64),
+                  control=np.array([0, SERVO], np.int8), prm=np.zeros((2, N_WPARAMS)),
+                  extent=np.tile([-1.0, -1.0, -1.0, 1.0, 1.0, 1.0], (2, 1)),
+                  mesh=[None, (verts - verts[0], tris)] if lid_kind == MESH else None)
+    walls.prm[1, [W_TARGET, W_GAIN, W_VMAX, W_AREA]] = 2000.0, 0.2, 0.05, 4e-4
+    return system([cube(0.02)], np.array([[0.0, 0.0, 0.01]]), np.array([[1.0, 0, 0, 0]]), np.zeros((1, 3)),
+                  np.zeros((1, 3)), walls, effects=("gravity", "friction", "local_damping"), local_damping=0.7)
+
+
+def test_a_servo_mesh_lid_presses_as_the_plane_lid():
+    # Given a cube under a servo lid, once a plane and once a flat mesh (same dt)
+    plane = servo_scene(PLANE)
+    mesh = servo_scene(MESH)
+    mesh.dt = plane.dt
+    # When both run 20000 steps
+    plane.advance(20000)
+    mesh.advance(20000)
+    # Then the mesh lid moves and carries the load as the plane lid does (measured: the same position, 3e-13 N), the
+    # servo's target reached (0.8 N to 1e-6)
+    np.testing.assert_allclose(mesh.wpoint[1, 2] - mesh.wpoint0[1, 2], plane.wpoint[1, 2] - plane.wpoint0[1, 2],
+                               rtol=0, atol=1e-12)
+    np.testing.assert_allclose(mesh.wforce, plane.wforce, rtol=0, atol=1e-9)
+    assert mesh.wforce[1, 2] == pytest.approx(0.8, rel=1e-6)  # the cube pushes the lid up
+    assert mesh.wpoint[1, 2] < mesh.wpoint0[1, 2]
 
 
 def test_smoke_case_stones_come_to_rest_on_an_stl_floor(tmp_path):
