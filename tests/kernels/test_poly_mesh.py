@@ -76,10 +76,10 @@ def test_prisms_of_a_flat_mesh_give_the_half_space_contact(seed, grid_mesh):
         placed = place(body, x, q)
         got = mesh_contact(placed, verts, tris)
         vol, g, s = polyhedron_plane_overlap(placed, n, d)
-        # Then one plane, whose V and centroid are the half-space's to round-off (measured: 2.4e-14
-        # relative), and so are S, the contact frame (normal, area, depth) and the force, unless a face
-        # of the body lies within the tie angle of a prism side (the band rounds S there on each side
-        # of the edge differently: measured 1.1e-4 relative at most)
+        # Then one plane, whose V and centroid are the half-space's to round-off (measured over the 32
+        # touching poses of the 4 seeds: 1.7e-14 relative, 1.2e-15 r), and so are S, the contact frame
+        # (normal, area, depth) and the force, unless a face of the body lies within the tie angle of a
+        # prism side (the band rounds S there on each side of the edge differently: 8.6e-5 at most)
         if vol == 0.0:
             assert got == []
             continue
@@ -94,7 +94,7 @@ def test_prisms_of_a_flat_mesh_give_the_half_space_contact(seed, grid_mesh):
         got_frame, plane_frame = frame(placed, v1, s1, n), frame(placed, vol, s, n)
         np.testing.assert_allclose(got_frame[:3], plane_frame[:3], rtol=0, atol=10 * tol)  # unit normal
         np.testing.assert_allclose(got_frame[3:], plane_frame[3:], rtol=10 * tol)  # area, depth
-    assert touched >= 6 and exact >= touched // 2  # measured: 5 of 7 at least
+    assert touched >= 6 and exact >= touched // 2  # measured: 30 of 32 over the seeds, 5 of 7 at least
 
 
 def fold(sign, half=1.0):

@@ -578,17 +578,13 @@ def _mesh_forces(k, wl, b, x, v, w, m, rb, mb, va, fsa, fverts, offa, na, da, me
     for c in range(n):
         if lead[c] == c and (carrier < 0 or res[c, R_V] > res[carrier, R_V]):
             carrier = c
-    for col in range(4):
-        wfc[k, col] = 0.0
-    for col in range(3):
-        wtq[k, col] = 0.0
-        wgeo[k, col] = 0.0
+    wfc[k, :4] = 0.0  # the sums below start from zero (and stay so when nothing touches)
+    wtq[k, :] = 0.0
+    wgeo[k, :] = 0.0
     if energy:
-        wen[k, 0] = 0.0
-        wen[k, 1] = 0.0
+        wen[k, :] = 0.0
     if carrier < 0 and friction:
-        for col in range(3):
-            wft[k, col] = 0.0
+        wft[k, :] = 0.0  # the contact opened: its spring dropped
     for c in range(n):
         if lead[c] != c:
             continue
