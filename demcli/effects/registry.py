@@ -162,8 +162,10 @@ _ROLLING_POLY = "a rolling-resistance moment corrects spheres for the shape they
 _PLANAR_POLY = "a 2D scene is made of disks (the polygons stage's sections are discretized into bonded disks); " \
                "a polyhedron's contact is a 3D overlap volume"
 _DASHPOT_SPHERES = "the sphere laws carry their restitution dashpot always (set restitution 1 for none)"
-_WALLS_POLY = "plane and box walls only: a polyhedron's wall contact is its overlap with a half-space; cylinder " \
-              "and mesh walls are for spheres and clumps"
+_WALLS_POLY = "plane, box and mesh walls only: a polyhedron's wall contact is its overlap with a half-space (a " \
+              "mesh: with the prism under each triangle); cylinder walls are for spheres and clumps"
+_WALLS_MIXED = "plane and box walls only: a polyhedron's wall contact is its overlap with a half-space; cylinder " \
+               "and mesh walls are for spheres and clumps"
 
 # in the order of the physics section's keys (docs/cases.md lists them so)
 register(EffectSpec(
@@ -209,7 +211,7 @@ register(EffectSpec(
     passes=("pairs:losses", "gather:losses"), counters=("energy",)))
 register(EffectSpec(
     "walls", "rigid plane, cylinder and triangle-mesh walls with velocity, force or servo control",
-    source="walls", declared_by="walls", limits={"polyhedra": _WALLS_POLY, "mixed": _WALLS_POLY},
+    source="walls", declared_by="walls", limits={"polyhedra": _WALLS_POLY, "mixed": _WALLS_MIXED},
     fields=(("wall_list", "wall_pair"), ("wall_force", "wall")),
     passes=("walls:move", "walls:list", "walls:control"), counters=("wallmove", "wallctrl")))
 register(EffectSpec(

@@ -27,7 +27,7 @@ from demcli.engine.sphere_shape import _empty2, contacts_tuple, stored_contacts
 from demcli.kernels import layout as K
 from demcli.kernels.bonds import N_BTABLE
 from demcli.kernels.shapes.polyhedra import Q_MU
-from demcli.kernels.walls import PLANE
+from demcli.kernels.walls import MESH, PLANE
 
 # bounding radius = template circumradius x (1 + BOUND_PAD): round-off of the world transform
 # can never put a vertex outside the sphere the broad phase and the pair pass test
@@ -197,9 +197,9 @@ class PolyShape:
     FRICTION = Q_MU  # column of prm with the friction coefficient
 
     def __init__(self, s, groups):
-        if len(s.walls) and np.any(np.asarray(s.walls.kind) != PLANE):
-            bad = [s.walls.name[k] for k in range(len(s.walls)) if s.walls.kind[k] != PLANE]
-            raise ValueError(f"polyhedra support plane walls only; not {bad}")
+        if len(s.walls) and np.any(np.isin(np.asarray(s.walls.kind), (PLANE, MESH), invert=True)):
+            bad = [s.walls.name[k] for k in range(len(s.walls)) if s.walls.kind[k] not in (PLANE, MESH)]
+            raise ValueError(f"polyhedra support plane and mesh walls only; not {bad}")
         s.law = 0
         s.prm = poly_pair_table(s.materials, s.model)
         ph = groups["polyhedra"]

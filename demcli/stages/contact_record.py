@@ -83,11 +83,32 @@ def _placed(system, b):
                   system.x[b].copy(), float(system.rad[b]))
 
 
+def _mesh_plane_overlap(system, b, wall):
+    """(V [m^3], centroid (3,) [m], S (3,) [m^2]) of body b against the mesh wall ``wall``: of the
+    plane (coplanar triangles) with the largest overlap volume (:mod:`demcli.kernels.poly_mesh`);
+    V = 0 when it touches none."""
+    from demcli.kernels.poly_mesh import R_GX, R_SX, R_V, mesh_pieces, mesh_scratch, plane_sums
+    from demcli.kernels.polyhedra import max_row
+
+    args = _placed(system, b).args()
+    ms = mesh_scratch(max_row(args[1]), len(args[1]) - 1)
+    p = system.wpoint[wall]
+    n = mesh_pieces(*args, system.wmesh, wall, p[0], p[1], p[2], ms)
+    res, lead = ms[5], ms[3]
+    plane_sums(res, n, lead, args[9])
+    planes = [m for m in range(n) if lead[m] == m]
+    if not planes:
+        return 0.0, p.copy(), np.zeros(3)
+    m = max(planes, key=lambda m: res[m, R_V])
+    return float(res[m, R_V]), res[m, R_GX:R_GX + 3].copy(), res[m, R_SX:R_SX + 3].copy()
+
+
 def _polyhedra_rows(system, keep):
     """:func:`contact_rows` of a polyhedron scene: each touching pair and body-wall contact with
     its depth, force, overlap centroid and area normal."""
     from demcli.kernels.polyhedra import polyhedron_overlap, polyhedron_plane_overlap
     from demcli.kernels.shapes.polyhedra import G_DEPTH
+    from demcli.kernels.walls import MESH
 
     nl, ids = system.nl, system.body_id
     rows = []
@@ -106,7 +127,10 @@ def _polyhedra_rows(system, keep):
         if keep is not None and not keep[i]:
             continue
         a = w.normal[wall]
-        vol, centroid, area = polyhedron_plane_overlap(_placed(system, i), a, float(a @ system.wpoint[wall]))
+        if int(w.kind[wall]) == MESH:  # its largest plane's contact (the row sums them: docs/walls.md)
+            vol, centroid, area = _mesh_plane_overlap(system, i, wall)
+        else:
+            vol, centroid, area = polyhedron_plane_overlap(_placed(system, i), a, float(a @ system.wpoint[wall]))
         n = area / np.linalg.norm(area) if vol > 0.0 else np.asarray(a, float)
         rows.append(_row(system, i, -(wall + 1), nl.wgeo[k, G_DEPTH], n, nl.wfc[k, :3], centroid, body=i))
     return rows

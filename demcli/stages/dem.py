@@ -116,7 +116,7 @@ WALL = Tagged("type", {
     "mesh": Section({
         "name": Str(default=None),
         "file": Str(doc="STL (ascii or binary) or OBJ triangle surface, relative to the case file; coincident "
-                        "vertices are merged (the contact of a sphere with the mesh, docs/walls.md)"),
+                        "vertices are merged (the contact of a sphere or polyhedron with the mesh, docs/walls.md)"),
         "scale": Float(min=0, min_inclusive=False, default=1.0, doc="file units to metres (0.001: millimetres)"),
         "rotate": Vector(3, "rad", default=(0.0, 0.0, 0.0), doc="turned about the fixed x, then y, then z axis "
                                                                "(e.g. [0, 180 deg, 0])"),
@@ -124,7 +124,7 @@ WALL = Tagged("type", {
         "normal": Vector(3, default=(0.0, 0.0, 1.0), doc="direction of servo and force motion, into the domain; "
                                                          "the wall records' position and force are along it"),
         "material": Str(), "rigid": _RIGID, "motion": MOTION,
-    }, check=_check_mesh_wall, doc="a rigid triangle mesh translating with its motion (spheres and clumps)"),
+    }, check=_check_mesh_wall, doc="a rigid triangle mesh translating with its motion (spheres, clumps and polyhedra)"),
     "cylinder": Section({
         "name": Str(default=None), "base": Vector(3, "m", doc="point on the axis (bottom)"),
         "axis": Vector(3, default=(0.0, 0.0, 1.0)), "radius": Float("m", min=0, min_inclusive=False),
@@ -366,7 +366,7 @@ def scene_check(cfg, case, k, scene, report, shapes=None):
     _measure_check(cfg, case, shapes, report)
     if set(shapes) <= {"polyhedra", "mixed"}:
         for k, w in enumerate(cfg.get("walls", ())):
-            if w.type in ("cylinder", "mesh"):
+            if w.type == "cylinder":
                 report(f"walls.{k}.type", f"is not for polyhedra: {EFFECTS['walls'].limits['polyhedra']}", w.type)
 
 

@@ -49,7 +49,7 @@ def make_system(ctx, cfg, groups, time=0.0, step=0, resume=False):
     """System, plan and time-step information for this stage (``resume``: from a checkpoint)."""
     from demcli.engine.plan import make_plan
     from demcli.engine.system import Dynamics, System
-    from demcli.kernels.walls import PLANE
+    from demcli.kernels.walls import MESH, PLANE
 
     walls = build_walls(cfg, ctx.case, ctx.runner.case_path, f"stages[{ctx.index}].walls")
     shape = scene_shape(groups)
@@ -59,7 +59,8 @@ def make_system(ctx, cfg, groups, time=0.0, step=0, resume=False):
                      bonds=bonded)
     # every effect on a shape it runs on (demcli check refuses the rest already, where it knows the shape)
     check_shape(plan.effects, shape, ctx.name)
-    if shape in ("polyhedra", "mixed") and np.any(np.asarray(walls.kind) != PLANE):
+    takes = (PLANE, MESH) if shape == "polyhedra" else (PLANE,)
+    if shape in ("polyhedra", "mixed") and np.any(np.isin(np.asarray(walls.kind), takes, invert=True)):
         raise InputError(f"stage {ctx.name}: walls: a scene with polyhedra takes {EFFECTS['walls'].limits[shape]}")
     p = cfg.physics
     dyn = Dynamics(gravity=tuple(p.gravity) if p.gravity is not None else (0.0, 0.0, 0.0),
@@ -101,7 +102,7 @@ def make_system(ctx, cfg, groups, time=0.0, step=0, resume=False):
 class StageSnapshots:
     """Sphere and polyhedron snapshots plus walls (a mixed scene writes both series, numbered
     alike), one ``write(state)`` and ``truncate(time)``; ``meshes``: the mesh walls' triangles
-    (:attr:`demcli.engine.system.Walls.mesh`, sphere and clump scenes)."""
+    (:attr:`demcli.engine.system.Walls.mesh`)."""
 
     def __init__(self, folder, shape, resume, meshes=None):
         from demcli.state.vtu import PvdSeries, Snapshots
@@ -112,6 +113,7 @@ class StageSnapshots:
         self.spheres = Snapshots(folder, resume=resume, meshes=meshes) if shape != "polyhedra" else None
         self.polyhedra = PolyhedraSnapshots(folder, resume=resume) if shape in ("polyhedra", "mixed") else None
         self.walls = PvdSeries(self.folder / "walls.pvd", resume=resume) if self.spheres is None else None
+        self.meshes = meshes
 
     def write(self, state):
         from demcli.state.vtu import write_walls_vtu
@@ -121,7 +123,7 @@ class StageSnapshots:
         if self.polyhedra is not None:
             self.polyhedra.write(state)
         if self.walls is not None and "walls/kind" in state and len(state["walls/kind"]):
-            path = write_walls_vtu(self.folder / f"walls_{self.polyhedra.count - 1:06d}.vtu", state)
+            path = write_walls_vtu(self.folder / f"walls_{self.polyhedra.count - 1:06d}.vtu", state, self.meshes)
             self.walls.add(float(state.meta.get("time", 0.0)), path)
 
     def truncate(self, time):

@@ -3,8 +3,8 @@ gives the plane's forces and trajectories bit for bit (spheres on a face, on an 
 vertex shared by four triangles, a clump bed), a moving flat mesh (velocity, force, servo) pushes
 a sphere onto a floor as the moving plane does, a ball rests in the fold of the Marshall head on
 two face contacts as the analytic equilibrium says, the mesh is drawn in the snapshots where it is,
-a scene without mesh walls has no mesh arrays, and bad mesh settings are configuration
-errors (exit code 2)."""
+a scene without mesh walls has no mesh arrays, bad mesh settings are configuration errors (exit
+code 2), and a polyhedral scene takes a mesh wall (not a cylinder)."""
 
 from pathlib import Path
 
@@ -224,13 +224,20 @@ def test_unreadable_mesh_stops_the_run_before_any_stage(tmp_path):
     assert not list(tmp_path.rglob("*.h5"))
 
 
-def test_mesh_wall_in_a_polyhedral_scene_is_refused(tmp_path):
-    # Given the quickstart case (polyhedral ballast) with a mesh wall in its deposit stage
+def test_mesh_wall_in_a_polyhedral_scene_is_checked_and_a_cylinder_refused(tmp_path):
+    # Given the quickstart case (polyhedral ballast) with a mesh wall, then a cylinder, in its deposit stage
     data = yaml.safe_load((CASES / "quickstart.yaml").read_text())
     deposit = next(s for s in data["stages"] if s["type"] == "deposit")
+    material = deposit["walls"][0]["material"]
     deposit["walls"].append({"type": "mesh", "file": str(CASES / "meshes" / "marshall_head.stl"), "scale": 0.001,
-                             "material": deposit["walls"][0]["material"]})
+                             "material": material})
     k = data["stages"].index(deposit)
-    # Then demcli check refuses it, saying why
+    path = tmp_path / "mesh.yaml"
+    path.write_text(yaml.safe_dump(data, sort_keys=False))
+    # Then demcli check takes the mesh wall (polyhedra touch it through the prisms under its triangles)
+    result = CliRunner().invoke(cli, ["check", str(path)])
+    assert result.exit_code == 0, result.output
+    # and refuses the cylinder, saying why
+    deposit["walls"][-1] = {"type": "cylinder", "base": [0, 0, 0], "radius": 0.1, "height": 0.2, "material": material}
     _check(tmp_path, yaml.safe_dump(data, sort_keys=False), f"stages[{k}].walls[{len(deposit['walls']) - 1}].type",
-           "is not for polyhedra", "mesh walls are for spheres and clumps")
+           "is not for polyhedra", "cylinder walls are for spheres and clumps")

@@ -207,7 +207,7 @@ def wall_pass(g, bd, nl, wa, prm, law, flags, dt):
     P._wall_forces(nl.wstart, nl.wwall, sg.xs, sg.vs, sg.ws, sg.smass, pg.rad, pg.mat, pg.shape, pg.vertex_start,
                    pg.face_start, pg.fvstart, pg.fverts, pg.bvstart, pg.bfstart, pg.wvert, pg.wnorm, pg.woff, wa.kind,
                    wa.point, wa.normal, wa.v, wa.material, g.qprm, dt, flags[F_FRICTION], flags[F_DASHPOT],
-                   flags[F_ENERGY], nl.wft, nl.wfc, nl.wtq, nl.wen, nl.wgeo, g.ns)
+                   flags[F_ENERGY], nl.wft, nl.wfc, nl.wtq, nl.wen, nl.wgeo, g.ns, None)  # plane walls only
 
 
 @njit

@@ -39,10 +39,12 @@ from numba import prange
 from demcli.jit import njit
 from demcli.kernels.contact import _to_tangent_plane
 from demcli.kernels.layout import F_DASHPOT, F_ENERGY, F_FRICTION
+from demcli.kernels.poly_mesh import R_GX, R_NX, R_SX, R_V, mesh_pieces, plane_sums, scratch_for
 from demcli.kernels.polyhedra import (BOX_PAD, contact_frame, max_row, overlap_in_box, overlap_ws, plane_overlap_ws,
                                       plane_scratch, scratch, to_world_planes)
 from demcli.kernels.quat import rotate
 from demcli.kernels.separation import gap, separating_direction
+from demcli.kernels.walls import MESH
 
 PolyGeometry = namedtuple("PolyGeometry", "rad mat shape vertex_start vertices face_start fvstart fverts "
                                           "face_normal face_offset bvstart bfstart wvert wnorm woff travel")
@@ -464,20 +466,23 @@ def wall_pass(g, bd, nl, wa, prm, law, flags, dt):
     _wall_forces(nl.wstart, nl.wwall, bd.x, bd.v, bd.w, bd.mass, g.rad, g.mat, g.shape, g.vertex_start,
                  g.face_start, g.fvstart, g.fverts, g.bvstart, g.bfstart, g.wvert, g.wnorm, g.woff, wa.kind, wa.point,
                  wa.normal, wa.v, wa.material, prm, dt, flags[F_FRICTION], flags[F_DASHPOT], flags[F_ENERGY], nl.wft,
-                 nl.wfc, nl.wtq, nl.wen, nl.wgeo, 0)
+                 nl.wfc, nl.wtq, nl.wen, nl.wgeo, 0, wa.mesh)
 
 
 @njit(parallel=True, internal=True)
 def _wall_forces(wstart, wwall, x, v, w, mass, rad, bmat, shape, vertex_start, face_start, fvstart, fverts, bvstart,
                  bfstart, wvert, wnorm, woff, wkind, wpoint, wnormal, wv, wmat, prm, dt, friction, dashpot, energy,
-                 wft, wfc, wtq, wen, wgeo, r0):
-    """Per body (prange), its plane-wall contacts (rows wstart[b]..wstart[b + 1], race-free);
-    bodies from ``r0`` (0; a mixed scene: its polyhedra)."""
+                 wft, wfc, wtq, wen, wgeo, r0, mesh):
+    """Per body (prange), its wall contacts (rows wstart[b]..wstart[b + 1], race-free): planes, and
+    with ``mesh`` (the MeshArrays; None without mesh walls: that path is not compiled) mesh walls
+    (:func:`_mesh_forces`); bodies from ``r0`` (0; a mixed scene: its polyhedra)."""
     nrow = wstart.shape[0] - 1
     max_fv = max_row(fvstart)
     max_v = max_row(bvstart)
+    max_f = max_row(face_start)
     for ch in prange((nrow - r0 + ROW_CHUNK - 1) // ROW_CHUNK):
         buf, heights, sd, work = plane_scratch(max_fv, max_v)  # once per chunk of bodies
+        ms = scratch_for(mesh, max_fv, max_f)  # None without mesh walls
         for b in range(r0 + ch * ROW_CHUNK, min(r0 + (ch + 1) * ROW_CHUNK, nrow)):
             k0 = wstart[b]
             k1 = wstart[b + 1]
@@ -496,12 +501,17 @@ def _wall_forces(wstart, wwall, x, v, w, mass, rad, bmat, shape, vertex_start, f
             m = mass[b]
             for k in range(k0, k1):
                 wl = wwall[k]
+                if mesh is not None:  # compiled for scenes with mesh walls only
+                    if wkind[wl] == MESH:
+                        _mesh_forces(k, wl, b, x, v, w, m, rb, bmat[b], va, fsa, fverts, offa, na, da, mesh, wpoint,
+                                     wv, wmat, prm, dt, friction, dashpot, energy, wft, wfc, wtq, wen, wgeo, ms)
+                        continue
                 wnx = wnormal[wl, 0]
                 wny = wnormal[wl, 1]
                 wnz = wnormal[wl, 2]
                 vol = 0.0
                 gx = gy = gz = sx = sy = sz = 0.0
-                if wkind[wl] == 0:  # plane; the registry refuses other kinds for polyhedra
+                if wkind[wl] == 0:  # plane; the registry refuses cylinders for polyhedra
                     wd = wnx * wpoint[wl, 0] + wny * wpoint[wl, 1] + wnz * wpoint[wl, 2]
                     vol, gx, gy, gz, sx, sy, sz = plane_overlap_ws(va, fsa, fverts, offa, na, da, xb0, xb1, xb2, rb,
                                                                    wnx, wny, wnz, wd, buf, heights, sd, work)
@@ -544,6 +554,71 @@ def _wall_forces(wstart, wwall, x, v, w, mass, rad, bmat, shape, vertex_start, f
                 if energy:
                     wen[k, 0] = ed
                     wen[k, 1] = ef
+
+@njit(internal=True)
+def _mesh_forces(k, wl, b, x, v, w, m, rb, mb, va, fsa, fverts, offa, na, da, mesh, wpoint, wv, wmat, prm, dt,
+                 friction, dashpot, energy, wft, wfc, wtq, wen, wgeo, ms):
+    """Row k: the loads of mesh wall wl on body b (bounding radius rb [m], mass m [kg], material mb).
+
+    The body's overlap with the prism under each triangle near it
+    (:func:`demcli.kernels.poly_mesh.mesh_pieces`), summed per plane (coplanar triangles:
+    :func:`demcli.kernels.poly_mesh.plane_sums`): V, centroid g and S of each plane give one contact
+    of the volumetric law, as a plane wall would (a flat mesh: the plane wall's contact to round-off).
+    The loads of the planes are summed into row k: wfc (force, servo stiffness), wtq (torque about
+    the centroid), wgeo (deepest depth d = V / A_c, summed F_N, K_t of the row's spring), wen. The
+    row's tangential spring wft[k] is carried by the plane of the largest V; the others start theirs
+    afresh each step (the sphere-mesh rule, docs/walls.md)."""
+    res = ms[5]
+    lead = ms[3]
+    fresh = ms[2]  # the closest points of the triangles (free once the pieces are found): a spring from zero
+    n = mesh_pieces(va, fsa, fverts, offa, na, da, x[b, 0], x[b, 1], x[b, 2], rb, mesh, wl, wpoint[wl, 0],
+                    wpoint[wl, 1], wpoint[wl, 2], ms)
+    plane_sums(res, n, lead, rb)
+    carrier = -1
+    for c in range(n):
+        if lead[c] == c and (carrier < 0 or res[c, R_V] > res[carrier, R_V]):
+            carrier = c
+    wfc[k, :4] = 0.0  # the sums below start from zero (and stay so when nothing touches)
+    wtq[k, :] = 0.0
+    wgeo[k, :] = 0.0
+    if energy:
+        wen[k, :] = 0.0
+    if carrier < 0 and friction:
+        wft[k, :] = 0.0  # the contact opened: its spring dropped
+    for c in range(n):
+        if lead[c] != c:
+            continue
+        vol = res[c, R_V]
+        wnx, wny, wnz = res[c, R_NX], res[c, R_NX + 1], res[c, R_NX + 2]
+        nx, ny, nz, area, depth = contact_frame(vol, res[c, R_SX], res[c, R_SX + 1], res[c, R_SX + 2], x[b, 0],
+                                                x[b, 1], x[b, 2], x[b, 0] - wnx, x[b, 1] - wny, x[b, 2] - wnz, rb, rb)
+        ax = res[c, R_GX] - x[b, 0]
+        ay = res[c, R_GX + 1] - x[b, 1]
+        az = res[c, R_GX + 2] - x[b, 2]
+        vx = v[b, 0] + w[b, 1] * az - w[b, 2] * ay - wv[wl, 0]
+        vy = v[b, 1] + w[b, 2] * ax - w[b, 0] * az - wv[wl, 1]
+        vz = v[b, 2] + w[b, 0] * ay - w[b, 1] * ax - wv[wl, 2]
+        if c == carrier:
+            spring, row = wft, k
+        else:
+            fresh[0, 0] = fresh[0, 1] = fresh[0, 2] = 0.0
+            spring, row = fresh, 0
+        cfx, cfy, cfz, ed, ef, fel, kserv, kt = _volumetric_law(
+            prm, mb, wmat[wl], vol, depth, area, nx, ny, nz, vx, vy, vz, m, dt, spring, row, friction, dashpot)
+        wfc[k, 0] += cfx
+        wfc[k, 1] += cfy
+        wfc[k, 2] += cfz
+        wfc[k, 3] += kserv
+        wtq[k, 0] += ay * cfz - az * cfy
+        wtq[k, 1] += az * cfx - ax * cfz
+        wtq[k, 2] += ax * cfy - ay * cfx
+        wgeo[k, 0] = max(wgeo[k, 0], depth)
+        wgeo[k, 1] += fel
+        if c == carrier:
+            wgeo[k, 2] = kt
+        if energy:
+            wen[k, 0] += ed
+            wen[k, 1] += ef
 
 
 @njit
