@@ -38,7 +38,8 @@ import math
 
 import numpy as np
 
-from demcli.stages.asphalt.common import lab_case_check
+from demcli.stages.asphalt.common import lab_case_check, orientation_check
+from demcli.stages.dem import config_inputs
 from demcli.stages.asphalt.diametral import declare_outputs, loading_fields, run_loading, specimen
 from demcli.stages.base import ENGINE_KEEPS, ENGINE_OUTPUT, StageType, register_stage
 from demcli.state.records import describe_column
@@ -78,6 +79,7 @@ def _case_check(cfg, case, k, scene, report):
     from demcli.stages.base import earlier_stage
 
     lab_case_check(cfg, case, k, scene, report)
+    orientation_check(cfg, case, k, report, "diametral", "indirect tension")
     section = earlier_stage(case, k, "polygons") if case.dimension == 2 else None
     if section is not None and section.specimen.shape != "circle":
         report("", f"indirect tension is a test of a disk: the section of stage {section.name!r} is not one; give "
@@ -110,5 +112,5 @@ register_stage(StageType(
     "idt", loading_fields("head speed (the standards: 50.8 mm/min)"), run_idt, needs_input=True,
     requires=("bodies/x", "spheres/radius"),
     provides=ENGINE_OUTPUT + ("idt_result/*",), keeps=ENGINE_KEEPS + ("bonded_specimen",),
-    case_check=_case_check,
+    case_check=_case_check, config_requires=config_inputs,
     doc="indirect tension (diametral compression) of a bonded cylinder or 2D disk section: load, ITS = 2 P / (pi t D)"))

@@ -31,7 +31,8 @@ import numpy as np
 
 from demcli.config.schema import Str
 from demcli.errors import InputError
-from demcli.stages.asphalt.common import lab_case_check
+from demcli.stages.asphalt.common import lab_case_check, orientation_check
+from demcli.stages.dem import config_inputs
 from demcli.stages.asphalt.diametral import declare_outputs, loading_fields, run_loading, specimen
 from demcli.stages.base import ENGINE_KEEPS, ENGINE_OUTPUT, StageType, register_stage
 
@@ -144,8 +145,10 @@ def _head_digest(cfg, case_dir):
 
 
 def _case_check(cfg, case, k, scene, report):
-    """The test stages' rules (:func:`lab_case_check`); a 3D prepared cylinder only."""
+    """The test stages' rules (:func:`lab_case_check`, :func:`orientation_check`); a 3D cylinder only
+    (a prepare stage's or a cut stage's)."""
     lab_case_check(cfg, case, k, scene, report)
+    orientation_check(cfg, case, k, report, "diametral", "the Marshall test")
     if case.dimension != 3:
         report("", "the Marshall test loads a 3D cylinder on its side: run it on a prepare stage's specimen",
                case.dimension)
@@ -178,5 +181,5 @@ def run_marshall(ctx, cfg, state_in):
 register_stage(StageType(
     "marshall", _fields(), run_marshall, needs_input=True, requires=("bodies/x", "spheres/radius"),
     provides=ENGINE_OUTPUT + ("marshall_result/*",), keeps=ENGINE_KEEPS + ("bonded_specimen",),
-    case_check=_case_check, file_digest=_head_digest,
+    case_check=_case_check, file_digest=_head_digest, config_requires=config_inputs,
     doc="Marshall stability and flow (ASTM D6927 breaking heads as mesh walls): peak load, deformation at the peak"))
