@@ -1,6 +1,8 @@
 """Dynamic modulus test (AASHTO T 342 style) on a bonded specimen: stage ``dynamic_modulus``.
 
-The specimen sits between two frictionless platens (plane walls, as in ``creep``); the top
+The specimen (a prepare stage's cylinder, a cut stage's cylinder filled by the mastic stage, or
+with ``section: box`` any prism) sits between two frictionless platens normal to its axis z
+(``orientation: axial``, the only one it takes; plane walls, as in ``creep``); the top
 platen carries a haversine axial stress at each frequency f of ``frequencies`` in turn,
 
     sigma(t) = sigma_c + sigma_a (1 - cos(2 pi f (t - T_f))) / 2      [Pa, compression positive],

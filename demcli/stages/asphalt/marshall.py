@@ -2,7 +2,8 @@
 ASTM D6927 geometry).
 
 The specimen of a ``prepare`` stage (group ``bonded_specimen``: a cylinder of diameter D and
-thickness t along z) lies on its side between the two curved breaking heads of the standard: the
+thickness t along z), or a ``cut`` stage's cylinder filled by the ``mastic`` stage (the 3D
+Marshall specimen, bonded by ``bonds.from_phases``), lies on its side (``orientation: diametral``) between the two curved breaking heads of the standard: the
 inner faces of cylindrical arcs of radius D/2 (ASTM: 50.8 mm for the 101.6 mm specimen), their
 axes parallel to the specimen's, on opposite sides of a diameter along x. The lower head is fixed;
 the upper one moves towards it along -x at the constant head speed ``speed`` (ASTM: 50.8 mm/min;
