@@ -4,10 +4,10 @@
 The specimen of a ``prepare`` stage (group ``bonded_specimen``: a cylinder of diameter D and
 thickness t along z), or the 3D Marshall specimen of the seed-000 chain (a ``cut`` stage's cylinder
 filled by the ``mastic`` stage, bonded here by ``bonds: {from_phases: true, create: true}``), is
-loaded across a diameter (``orientation: diametral``, the only one it takes), along x, between two rigid flat heads: plane
-walls touching its outermost spheres, one fixed, the other moving at the constant head speed
-``speed`` (the standards: 50.8 mm/min; a DEM run affords far faster, see the quasi-static check).
-For an elastic disk under a line load P, the stress across the loaded diameter is a uniform
+loaded across a diameter (``orientation: diametral``, the only one it takes), along x, between
+two rigid flat heads: plane walls touching its outermost spheres, one fixed, the other moving at
+the constant head speed ``speed`` (the standards: 50.8 mm/min; a DEM run affords far faster,
+see the quasi-static check). For an elastic disk under a line load P, the stress across the loaded diameter is a uniform
 tension sigma = 2 P / (pi t D) (Timoshenko & Goodier, sec. 41), the indirect tensile strength
 ITS = 2 P_max / (pi t D) at the peak load. The standards' 12.7 mm curved loading strips spread the
 load; flat heads load the outermost spheres, which the elastic centre stress does not notice

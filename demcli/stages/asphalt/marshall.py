@@ -2,17 +2,18 @@
 ASTM D6927 geometry).
 
 The specimen of a ``prepare`` stage (group ``bonded_specimen``: a cylinder of diameter D and
-thickness t along z), or a ``cut`` stage's cylinder filled by the ``mastic`` stage (the 3D
-Marshall specimen, bonded by ``bonds.from_phases``), lies on its side (``orientation: diametral``) between the two curved breaking heads of the standard: the
-inner faces of cylindrical arcs of radius D/2 (ASTM: 50.8 mm for the 101.6 mm specimen), their
-axes parallel to the specimen's, on opposite sides of a diameter along x. The lower head is fixed;
-the upper one moves towards it along -x at the constant head speed ``speed`` (ASTM: 50.8 mm/min;
-a DEM run affords far faster, see the quasi-static check). The heads are mesh walls read from
-``head_file`` (``cases/meshes/marshall_head.stl``: an arc about the file's y axis, +-40 degrees
-about -z, 76.2 mm long, in mm), scaled by s = (D/2) / R_file so that their radius is the
-specimen's (a specimen of another diameter than 101.6 mm gets a head scaled by the same factor
-in arc radius and length; the log says so), turned so that the file's y axis lies along z and
-its concave side faces the specimen, and moved along x until they touch its outermost spheres.
+thickness t along z), or a ``cut`` stage's cylinder filled by the ``mastic`` stage (the 3D Marshall
+specimen, bonded by ``bonds.from_phases``), lies on its side (``orientation: diametral``) between
+the two curved breaking heads of the standard: the inner faces of cylindrical arcs of radius D/2
+(ASTM: 50.8 mm for the 101.6 mm specimen), their axes parallel to the specimen's, on opposite sides
+of a diameter along x. The lower head is fixed; the upper one moves towards it along -x at the
+constant head speed ``speed`` (ASTM: 50.8 mm/min; a DEM run affords far faster, see the quasi-static
+check). The heads are mesh walls read from ``head_file`` (``cases/meshes/marshall_head.stl``: an arc
+about the file's y axis, +-40 degrees about -z, 76.2 mm long, in mm), scaled by s = (D/2) / R_file
+so that their radius is the specimen's (a specimen of another diameter than 101.6 mm gets a head
+scaled by the same factor in arc radius and length; the log says so), turned so that the file's y
+axis lies along z and its concave side faces the specimen, and moved along x until they touch its
+outermost spheres.
 
 The measured curve is the load P (the particles' push on the moving head, compression positive,
 [N]) against the deformation delta (the heads' approach, [m]). The standard's results are the
