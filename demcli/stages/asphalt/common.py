@@ -17,7 +17,7 @@ import math
 
 import numpy as np
 
-from demcli.config.schema import Float, Optional, Section
+from demcli.config.schema import Float, Optional, Section, Str
 from demcli.state.fields import Field, register, register_group
 
 TEST_TIME = Section({
@@ -253,20 +253,70 @@ def solid_volume(state):
     return float(np.sum(ag["volume"])) if ag is not None else 0.0
 
 
+ORIENTATIONS = {
+    "diametral": "loaded across the cylinder's axis (z), along x: indirect tension, Marshall stability",
+    "axial": "loaded along the cylinder's axis (z): dynamic modulus",
+}
+
+
+def orientation_field(default):
+    """The ``orientation`` key of a test stage: how the load meets the specimen's axis."""
+    return Str(choices=tuple(ORIENTATIONS), default=default,
+               doc="how the load meets the cylinder's axis (z; the axis of a prepare stage's specimen and of a "
+                   "cut stage's cylinder): " + "; ".join(f"{k}: {v}" for k, v in ORIENTATIONS.items()))
+
+
+def orientation_check(cfg, case, k, report, needed, test):
+    """Report an ``orientation`` other than ``needed`` (the one ``test`` is defined for) and, for
+    a diametral test in 3D, a prism cut by an earlier ``cut`` stage (no axis to load across)."""
+    from demcli.stages.base import earlier_stage
+
+    if cfg.orientation != needed:
+        report("orientation", f"{test} is {needed}: {ORIENTATIONS[needed]}", cfg.orientation)
+    cut = earlier_stage(case, k, "cut") if case.dimension == 3 else None
+    if needed == "diametral" and cut is not None and cut.shape.shape != "cylinder":
+        report("orientation", f"{test} loads a cylinder across its axis: the specimen of stage {cut.name!r} is a "
+                              f"{cut.shape.shape}; cut a cylinder", cfg.orientation)
+
+
+def cylinder_specimen(groups, x, where):
+    """(radius [m], height [m], base (3,) [m]: centre of the lower face) of a 3D test's cylinder
+    (axis z): a prepare stage's ``bonded_specimen`` (base at the sphere centres' mean x, y), or
+    the cylinder of a cut stage's ``specimen`` group (the 3D Marshall specimen of the mastic
+    stage). An InputError naming ``where`` when the input holds neither, or a cut prism."""
+    from demcli.errors import InputError
+    from demcli.stages.asphalt.mastic import str_list
+
+    sp = groups.get("bonded_specimen")
+    if sp is not None:
+        return float(sp["radius"]), float(sp["height"]), np.array([*x[:, :2].mean(axis=0), float(sp["base_z"])])
+    cut = groups.get("specimen")
+    if cut is None:
+        raise InputError(f"{where}: its input has no bonded_specimen group (a prepare stage) and no cut specimen "
+                         "(a cut stage)")
+    shape = str_list(cut["shape"])[0]
+    if shape != "cylinder":
+        raise InputError(f"{where}: the cut specimen is a {shape}, not a cylinder")
+    centre, size = np.asarray(cut["centre"], float), np.asarray(cut["size"], float)
+    return 0.5 * float(size[0]), float(size[2]), np.array([centre[0], centre[1], centre[2] - 0.5 * size[2]])
+
+
 def lab_case_check(cfg, case, k, scene, report, specimen=True):
-    """Case rules of a laboratory test stage (``idt``, ``dynamic_modulus``): those of a dem stage
-    (:func:`demcli.stages.dem.scene_check`); in 3D, when ``specimen``, the input's
-    ``bonded_specimen`` group (a prepare stage); in 2D a section of disks (discretize, or any
-    planar scene); in both, bonds in the input or a ``bonds`` section that creates them."""
+    """Case rules of a laboratory test stage (``idt``, ``marshall``, ``dynamic_modulus``): those of
+    a dem stage (:func:`demcli.stages.dem.scene_check`); in 3D, when ``specimen``, the input's
+    ``bonded_specimen`` group (a prepare stage) or a cut stage's ``specimen`` (the mastic stage's
+    3D Marshall specimen, bonded by ``bonds.from_phases``); in 2D a section of disks (discretize,
+    or any planar scene); in both, bonds in the input or a ``bonds`` section that creates them."""
     from demcli.stages import dem
     from demcli.stages.base import has_field
 
     dem.scene_check(cfg, case, k, scene, report)
     if scene is None:
         return
-    if case.dimension == 3 and specimen and not has_field(scene, "bonded_specimen/radius"):
-        report("", "reads bonded_specimen/radius from the input, which no earlier stage writes (a prepare stage "
-                   "does; or run it on a 2D section, dimension: 2)")
+    if case.dimension == 3 and specimen and not (has_field(scene, "bonded_specimen/radius")
+                                                 or has_field(scene, "specimen/size")):
+        report("", "reads bonded_specimen/radius (a prepare stage) or specimen/size (a cut stage) from the input, "
+                   "which no earlier stage writes (or run it on a 2D section, dimension: 2)")
     if not has_field(scene, "bonds/i") and not (cfg.get("bonds") is not None and cfg.bonds.create):
         report("bonds", "the input holds no bonds: give bonds: {create: true, models: [...]} to bond the specimen's "
                         "touching spheres at the stage start", None)

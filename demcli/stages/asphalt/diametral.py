@@ -17,9 +17,9 @@ import math
 import numpy as np
 
 from demcli.config.schema import Float, Str
-from demcli.errors import InputError
 from demcli.stages import dem, loop
-from demcli.stages.asphalt.common import KINETIC_LIMIT_DOC, TEST_TIME, kinetic_to_work, planar_slab
+from demcli.stages.asphalt.common import KINETIC_LIMIT_DOC, TEST_TIME, cylinder_specimen, kinetic_to_work
+from demcli.stages.asphalt.common import orientation_field, planar_slab
 from demcli.stages.asphalt.common import quasi_static_warning
 from demcli.state.fields import Field, register, register_group
 from demcli.state.records import describe_column
@@ -49,6 +49,7 @@ def loading_fields(speed_doc):
         "post_peak": Float(min=0, max=1, default=0.5, doc="stop once the load falls below this share of the peak"),
         "head_material": Str(doc="material of the loading heads"),
         "quasi_static": Float(min=0, min_inclusive=False, default=0.01, doc=KINETIC_LIMIT_DOC),
+        "orientation": orientation_field("diametral"),
         "time": TEST_TIME,
     })
     return f
@@ -56,16 +57,15 @@ def loading_fields(speed_doc):
 
 def specimen(ctx, groups, x):
     """(D [m] or None, t [m], base (3,) [m]: centre of the disk's lower face) from the sphere
-    centres ``x`` (n, 3) [m]: the prepared cylinder's (3D), or for a 2D section D None (the
+    centres ``x`` (n, 3) [m]: the 3D cylinder's (a prepare stage's or a cut stage's,
+    :func:`demcli.stages.asphalt.common.cylinder_specimen`), or for a 2D section D None (the
     heads' first distance) and t the case's thickness, the base half a thickness below the
     disks' plane."""
     if ctx.case.dimension == 2:
         t, z = planar_slab(ctx.case, x)
         return None, t, np.array([*x[:, :2].mean(axis=0), z - 0.5 * t])
-    sp = groups.get("bonded_specimen")
-    if sp is None:
-        raise InputError(f"stage {ctx.name}: its input has no bonded_specimen group (written by a prepare stage)")
-    return 2.0 * float(sp["radius"]), float(sp["height"]), np.array([*x[:, :2].mean(axis=0), float(sp["base_z"])])
+    r, h, base = cylinder_specimen(groups, x, f"stage {ctx.name}")
+    return 2.0 * r, h, base
 
 
 def run_loading(ctx, cfg, state_in, walls, sep0, D, table, extra, result):

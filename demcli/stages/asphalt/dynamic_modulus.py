@@ -1,6 +1,8 @@
 """Dynamic modulus test (AASHTO T 342 style) on a bonded specimen: stage ``dynamic_modulus``.
 
-The specimen sits between two frictionless platens (plane walls, as in ``creep``); the top
+The specimen (a prepare stage's cylinder, a cut stage's cylinder filled by the mastic stage, or
+with ``section: box`` any prism) sits between two frictionless platens normal to its axis z
+(``orientation: axial``, the only one it takes; plane walls, as in ``creep``); the top
 platen carries a haversine axial stress at each frequency f of ``frequencies`` in turn,
 
     sigma(t) = sigma_c + sigma_a (1 - cos(2 pi f (t - T_f))) / 2      [Pa, compression positive],
@@ -44,7 +46,8 @@ from demcli.config.schema import Float, Int, List, Optional, Section, Str
 from demcli.errors import InputError
 from demcli.kernels import walls as W
 from demcli.stages import dem, loop
-from demcli.stages.asphalt.common import TEST_TIME, kinetic_to_work, lab_case_check, planar_slab
+from demcli.stages.asphalt.common import TEST_TIME, cylinder_specimen, kinetic_to_work, lab_case_check
+from demcli.stages.asphalt.common import orientation_check, orientation_field, planar_slab
 from demcli.stages.base import ENGINE_KEEPS, ENGINE_OUTPUT, StageType, register_stage
 from demcli.state.fields import Field, register, register_group
 from demcli.state.records import describe_column
@@ -120,10 +123,12 @@ def _fields():
         "load_mass": Optional(Float("kg", min=0, min_inclusive=False),
                               doc="mass of the top platen (default: 1 % of the specimen's, as integrated)"),
         "section": Str(choices=("specimen", "box"), default="specimen",
-                       doc="specimen: the cylinder of the input's bonded_specimen group (a prepare stage); box: "
+                       doc="specimen: the input's cylinder (a prepare stage's bonded_specimen or a cut stage's "
+                           "specimen); box: "
                            "the spheres' bounding box (a prism specimen, e.g. a lattice)"),
         "quasi_static_limit": Float(min=0, min_inclusive=False, default=0.1,
                                     doc="warn when f / f_n exceeds it (f_n: the axial natural frequency)"),
+        "orientation": orientation_field("axial"),
         "kinetic_limit": Float(min=0, min_inclusive=False, default=0.01,
                                doc="warn when the kinetic energy exceeds this share of the platen's work on a row of "
                                    "a frequency's measured cycles (0.01: see docs/asphalt_lab.md)"),
@@ -135,7 +140,9 @@ def _fields():
 def specimen_geometry(cfg, state, case):
     """(section area A [m^2], height H_0 [m], centre of the bottom platen (3,) [m], half-extents
     (3,) of the platens [m] (0 along the axis), loading axis: 2 (z) in 3D, 1 (y) in 2D) from the
-    bonded_specimen group or the spheres' bounding box. In 2D the specimen is the section's
+    3D cylinder (:func:`demcli.stages.asphalt.common.cylinder_specimen`: a prepare stage's
+    bonded_specimen or a cut stage's cylinder, whose H_0 and platens are those of its spheres'
+    extent along z) or the spheres' bounding box. In 2D the specimen is the section's
     bounding box, a plane-stress slice of the case's thickness t: A = width x t."""
     groups = state.groups
     x = state.sphere_centres()
@@ -148,13 +155,14 @@ def specimen_geometry(cfg, state, case):
     if cfg.section == "box":
         half = np.r_[0.5 * (hi[:2] - lo[:2]), 0.0]
         return float(4 * half[0] * half[1]), float(hi[2] - lo[2]), np.r_[0.5 * (lo[:2] + hi[:2]), lo[2]], half, 2
-    sp = groups.get("bonded_specimen")
-    if sp is None:
-        raise InputError("its input has no bonded_specimen group (written by a prepare stage): run a prepare "
-                         "stage first, or give section: box for a prism specimen")
-    r0, h0 = float(sp["radius"]), float(sp["height"])
-    c = x[:, :2].mean(axis=0)
-    return math.pi * r0 * r0, h0, np.array([c[0], c[1], float(sp["base_z"])]), np.array([r0, r0, 0.0]), 2
+    try:
+        r0, h0, base = cylinder_specimen(groups, x, "the specimen")
+    except InputError as e:
+        raise InputError(f"{e}: run a prepare or cut stage first, or give section: box for a prism "
+                         "specimen") from None
+    if "bonded_specimen" not in groups:  # a cut specimen: platens on its outermost spheres (crossing: keep
+        base[2], h0 = lo[2], float(hi[2] - lo[2])  # leaves aggregates standing out of the nominal cylinder)
+    return math.pi * r0 * r0, h0, base, np.array([r0, r0, 0.0]), 2
 
 
 def _walls(cfg, base, h0, half, area, mload, axis):
@@ -303,9 +311,14 @@ def _report(ctx, cfg, res, n_s):
                     "lighten the platen or the mass scaling, or lower the frequencies")
 
 
+def _case_check(cfg, case, k, scene, report):
+    """The test stages' rules (:func:`lab_case_check`) and the axial orientation."""
+    lab_case_check(cfg, case, k, scene, report, specimen=cfg.section == "specimen")
+    orientation_check(cfg, case, k, report, "axial", "the dynamic modulus test")
+
+
 register_stage(StageType(
     "dynamic_modulus", _fields(), run_dynamic_modulus, needs_input=True,
     provides=ENGINE_OUTPUT + ("dynamic_modulus_result/*",), keeps=ENGINE_KEEPS + ("bonded_specimen",),
-    case_check=lambda cfg, case, k, scene, report: lab_case_check(cfg, case, k, scene, report,
-                                                                  specimen=cfg.section == "specimen"),
+    case_check=_case_check, config_requires=dem.config_inputs,
     doc="AASHTO T 342 style dynamic modulus: haversine stress at several frequencies, |E*| and phase angle"))

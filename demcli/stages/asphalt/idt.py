@@ -2,10 +2,12 @@
 (issue #32; AASHTO T 322 / ASTM D6931 geometry).
 
 The specimen of a ``prepare`` stage (group ``bonded_specimen``: a cylinder of diameter D and
-thickness t along z) is loaded across a diameter, along x, between two rigid flat heads: plane
-walls touching its outermost spheres, one fixed, the other moving at the constant head speed
-``speed`` (the standards: 50.8 mm/min; a DEM run affords far faster, see the quasi-static check).
-For an elastic disk under a line load P, the stress across the loaded diameter is a uniform
+thickness t along z), or the 3D Marshall specimen of the seed-000 chain (a ``cut`` stage's cylinder
+filled by the ``mastic`` stage, bonded here by ``bonds: {from_phases: true, create: true}``), is
+loaded across a diameter (``orientation: diametral``, the only one it takes), along x, between
+two rigid flat heads: plane walls touching its outermost spheres, one fixed, the other moving at
+the constant head speed ``speed`` (the standards: 50.8 mm/min; a DEM run affords far faster,
+see the quasi-static check). For an elastic disk under a line load P, the stress across the loaded diameter is a uniform
 tension sigma = 2 P / (pi t D) (Timoshenko & Goodier, sec. 41), the indirect tensile strength
 ITS = 2 P_max / (pi t D) at the peak load. The standards' 12.7 mm curved loading strips spread the
 load; flat heads load the outermost spheres, which the elastic centre stress does not notice
@@ -38,7 +40,8 @@ import math
 
 import numpy as np
 
-from demcli.stages.asphalt.common import lab_case_check
+from demcli.stages.asphalt.common import lab_case_check, orientation_check
+from demcli.stages.dem import config_inputs
 from demcli.stages.asphalt.diametral import declare_outputs, loading_fields, run_loading, specimen
 from demcli.stages.base import ENGINE_KEEPS, ENGINE_OUTPUT, StageType, register_stage
 from demcli.state.records import describe_column
@@ -78,6 +81,7 @@ def _case_check(cfg, case, k, scene, report):
     from demcli.stages.base import earlier_stage
 
     lab_case_check(cfg, case, k, scene, report)
+    orientation_check(cfg, case, k, report, "diametral", "indirect tension")
     section = earlier_stage(case, k, "polygons") if case.dimension == 2 else None
     if section is not None and section.specimen.shape != "circle":
         report("", f"indirect tension is a test of a disk: the section of stage {section.name!r} is not one; give "
@@ -110,5 +114,5 @@ register_stage(StageType(
     "idt", loading_fields("head speed (the standards: 50.8 mm/min)"), run_idt, needs_input=True,
     requires=("bodies/x", "spheres/radius"),
     provides=ENGINE_OUTPUT + ("idt_result/*",), keeps=ENGINE_KEEPS + ("bonded_specimen",),
-    case_check=_case_check,
+    case_check=_case_check, config_requires=config_inputs,
     doc="indirect tension (diametral compression) of a bonded cylinder or 2D disk section: load, ITS = 2 P / (pi t D)"))

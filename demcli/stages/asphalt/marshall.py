@@ -2,16 +2,18 @@
 ASTM D6927 geometry).
 
 The specimen of a ``prepare`` stage (group ``bonded_specimen``: a cylinder of diameter D and
-thickness t along z) lies on its side between the two curved breaking heads of the standard: the
-inner faces of cylindrical arcs of radius D/2 (ASTM: 50.8 mm for the 101.6 mm specimen), their
-axes parallel to the specimen's, on opposite sides of a diameter along x. The lower head is fixed;
-the upper one moves towards it along -x at the constant head speed ``speed`` (ASTM: 50.8 mm/min;
-a DEM run affords far faster, see the quasi-static check). The heads are mesh walls read from
-``head_file`` (``cases/meshes/marshall_head.stl``: an arc about the file's y axis, +-40 degrees
-about -z, 76.2 mm long, in mm), scaled by s = (D/2) / R_file so that their radius is the
-specimen's (a specimen of another diameter than 101.6 mm gets a head scaled by the same factor
-in arc radius and length; the log says so), turned so that the file's y axis lies along z and
-its concave side faces the specimen, and moved along x until they touch its outermost spheres.
+thickness t along z), or a ``cut`` stage's cylinder filled by the ``mastic`` stage (the 3D Marshall
+specimen, bonded by ``bonds.from_phases``), lies on its side (``orientation: diametral``) between
+the two curved breaking heads of the standard: the inner faces of cylindrical arcs of radius D/2
+(ASTM: 50.8 mm for the 101.6 mm specimen), their axes parallel to the specimen's, on opposite sides
+of a diameter along x. The lower head is fixed; the upper one moves towards it along -x at the
+constant head speed ``speed`` (ASTM: 50.8 mm/min; a DEM run affords far faster, see the quasi-static
+check). The heads are mesh walls read from ``head_file`` (``cases/meshes/marshall_head.stl``: an arc
+about the file's y axis, +-40 degrees about -z, 76.2 mm long, in mm), scaled by s = (D/2) / R_file
+so that their radius is the specimen's (a specimen of another diameter than 101.6 mm gets a head
+scaled by the same factor in arc radius and length; the log says so), turned so that the file's y
+axis lies along z and its concave side faces the specimen, and moved along x until they touch its
+outermost spheres.
 
 The measured curve is the load P (the particles' push on the moving head, compression positive,
 [N]) against the deformation delta (the heads' approach, [m]). The standard's results are the
@@ -31,7 +33,8 @@ import numpy as np
 
 from demcli.config.schema import Str
 from demcli.errors import InputError
-from demcli.stages.asphalt.common import lab_case_check
+from demcli.stages.asphalt.common import lab_case_check, orientation_check
+from demcli.stages.dem import config_inputs
 from demcli.stages.asphalt.diametral import declare_outputs, loading_fields, run_loading, specimen
 from demcli.stages.base import ENGINE_KEEPS, ENGINE_OUTPUT, StageType, register_stage
 
@@ -144,8 +147,10 @@ def _head_digest(cfg, case_dir):
 
 
 def _case_check(cfg, case, k, scene, report):
-    """The test stages' rules (:func:`lab_case_check`); a 3D prepared cylinder only."""
+    """The test stages' rules (:func:`lab_case_check`, :func:`orientation_check`); a 3D cylinder only
+    (a prepare stage's or a cut stage's)."""
     lab_case_check(cfg, case, k, scene, report)
+    orientation_check(cfg, case, k, report, "diametral", "the Marshall test")
     if case.dimension != 3:
         report("", "the Marshall test loads a 3D cylinder on its side: run it on a prepare stage's specimen",
                case.dimension)
@@ -178,5 +183,5 @@ def run_marshall(ctx, cfg, state_in):
 register_stage(StageType(
     "marshall", _fields(), run_marshall, needs_input=True, requires=("bodies/x", "spheres/radius"),
     provides=ENGINE_OUTPUT + ("marshall_result/*",), keeps=ENGINE_KEEPS + ("bonded_specimen",),
-    case_check=_case_check, file_digest=_head_digest,
+    case_check=_case_check, file_digest=_head_digest, config_requires=config_inputs,
     doc="Marshall stability and flow (ASTM D6927 breaking heads as mesh walls): peak load, deformation at the peak"))
