@@ -3,12 +3,14 @@
 * ``chains``: the contacts of ``force_chains.pvd`` as tubes whose radius and colour follow their
   normal force (only those pushing, F_n > 0), over the translucent particles (``polyhedra.pvd``,
   or sphere glyphs of ``spheres.pvd``);
+* ``mesh``: the polyhedra (``polyhedra.pvd``, if any) on the stage's
+  walls (``walls.pvd``: STL/OBJ meshes and the other walls as surfaces), seen from above at an angle;
 * ``fields``: the coarse-grained pressure of ``fields.pvd`` on the vertical slice through the
   grid's middle (normal y), with the particles cut there as outlines.
 
 Run with ParaView's batch interpreter (Debian: ``apt install paraview python3-paraview xvfb``)::
 
-    xvfb-run -a pvbatch docs/measure_figures/render_measures.py chains|fields STAGE_DIR SNAPSHOT OUT.png
+    xvfb-run -a pvbatch docs/measure_figures/render_measures.py chains|fields|mesh STAGE_DIR SNAPSHOT OUT.png
 
 e.g. ``chains runs/box/sleeper 5 docs/measure_figures/ballast_box_force_chains.png`` after the
 run of docs/measure.md (snapshot 5: just after the peak load of the sleeper's cycle).
@@ -134,5 +136,24 @@ def fields(folder, snapshot, out):
     _report(time, (("fields", reader), ("slice", cut)))
 
 
+def mesh(folder, snapshot, out):
+    walls = PVDReader(FileName=f"{folder}/walls.pvd")
+    view, time = _view(walls, snapshot)
+    shown = Show(walls, view)
+    shown.DiffuseColor = shown.AmbientColor = [0.55, 0.62, 0.75]
+    shown.Representation = "Surface With Edges"
+    bodies = PVDReader(FileName=f"{folder}/polyhedra.pvd") if os.path.exists(f"{folder}/polyhedra.pvd") else None
+    if bodies is not None:
+        b = Show(bodies, view)
+        b.DiffuseColor = b.AmbientColor = [0.80, 0.55, 0.35]
+    walls.UpdatePipeline(time)
+    lo = walls.GetDataInformation().GetBounds()
+    middle = [(lo[0] + lo[1]) / 2, (lo[2] + lo[3]) / 2, (lo[4] + lo[5]) / 2]
+    span = max(lo[1] - lo[0], lo[3] - lo[2])
+    _camera(view, [middle[0] + 0.6 * span, middle[1] - 1.2 * span, middle[2] + 0.9 * span], middle)
+    SaveScreenshot(out, view, ImageResolution=[WIDTH, HEIGHT])
+    _report(time, (("walls", walls),) + ((("bodies", bodies),) if bodies is not None else ()))
+
+
 if __name__ == "__main__":
-    {"chains": chains, "fields": fields}[sys.argv[1]](*sys.argv[2:5])
+    {"chains": chains, "fields": fields, "mesh": mesh}[sys.argv[1]](*sys.argv[2:5])
