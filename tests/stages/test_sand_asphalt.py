@@ -2,6 +2,7 @@
 against hand computations, the pressure-loaded membrane, and bad input."""
 
 import math
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -12,7 +13,7 @@ from demcli import run_case
 from demcli.cli import cli
 from demcli.compare import read_record
 from demcli.kernels.bonds import BURGERS, INTACT
-from demcli.stages.asphalt.sand import confining_stress, dilation_gradient, strains
+from demcli.stages.asphalt.sand import confining_stress, dilation_gradient, loading_work, strains
 from demcli.state import read_state
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -178,3 +179,33 @@ def test_a_share_of_the_contacts_bonded_leaves_the_others_as_contacts(uniaxial, 
     overlapping = {(i, j) for i, j in every - bonded if np.linalg.norm(x[i] - x[j]) < r[i] + r[j]}
     contacts = set(zip(part["contacts/i"].tolist(), part["contacts/j"].tolist()))
     assert overlapping and overlapping <= contacts and not contacts & bonded
+
+
+def test_loading_work_is_the_platen_and_membrane_work_integrals():
+    # Given: a platen force growing linearly with the shortening u (F = k u) at a fixed radius, and a
+    # radius growing linearly at a fixed height under a confining stress
+    k, h0 = 2.0e6, 0.1
+    u = np.linspace(0.0, 1e-3, 11)
+    w_axial = loading_work(k * u, h0 - u, np.full(11, 0.05), 0.0)
+    r = np.linspace(0.05, 0.051, 11)
+    w_membrane = loading_work(np.zeros(11), np.full(11, h0), r, 1e5)
+    # Then: the trapezoid rule is exact for these integrands: W = k u^2 / 2, and the membrane does
+    # W = -sigma_3 pi h (r1^2 - r0^2) on an expanding specimen (it pushes in while the side moves out)
+    assert w_axial[-1] == pytest.approx(0.5 * k * u[-1] ** 2, rel=1e-12)
+    assert w_membrane[-1] == pytest.approx(-1e5 * math.pi * h0 * (r[-1] ** 2 - r[0] ** 2), rel=1e-12)
+
+
+def test_creep_checks_that_it_is_quasi_static_after_the_step_load(uniaxial, tmp_path):
+    # Given: the smoke creep run (its rows from 5 % of the duration on are counted)
+    st = read_state(uniaxial / "01-creep.h5")
+    ratio = _csv(uniaxial / "records" / "creep_creep.csv")["kinetic_to_work"]
+    # Then: E_k / W after the transient is small, and the summary holds the largest counted ratio
+    assert 0.0 < st["creep_result/kinetic_to_work"] < 0.01
+    assert "not quasi-static" not in (uniaxial / "log.txt").read_text()
+    # When: the rows of the step load itself are counted too (transient 0)
+    shutil.copy(uniaxial / "00-prepare.h5", tmp_path / "00-prepare.h5")
+    run_case(SMOKE / "sand_asphalt_uniaxial.yaml", out=tmp_path, quiet=True, only="creep",
+             overrides=["stages.creep.transient=0"])
+    # Then: the ringing of the step is caught and warned about
+    assert read_state(tmp_path / "01-creep.h5")["creep_result/kinetic_to_work"] > 0.01 > np.nanmax(ratio[5:])
+    assert "warning: the loading is not quasi-static" in (tmp_path / "log.txt").read_text()

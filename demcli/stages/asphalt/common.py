@@ -341,9 +341,14 @@ def kinetic_to_work(kinetic, force, displacement):
     """
     f, u = np.asarray(force, float), np.asarray(displacement, float)
     work = np.concatenate([[0.0], np.cumsum(0.5 * (f[1:] + f[:-1]) * np.diff(u))])
+    return kinetic_ratio(kinetic, work), work
+
+
+def kinetic_ratio(kinetic, work):
+    """E_k / W per row (NaN where the work W <= 0); kinetic [J], work [J] (n,)."""
+    work = np.asarray(work, float)
     with np.errstate(divide="ignore", invalid="ignore"):
-        ratio = np.where(work > 0.0, np.asarray(kinetic, float) / work, np.nan)
-    return ratio, work
+        return np.where(work > 0.0, np.asarray(kinetic, float) / work, np.nan)
 
 
 def quasi_static_warning(ctx, ratio, work, limit, advice, upto=None):

@@ -37,7 +37,7 @@ import numpy as np
 from demcli.config.schema import Float, Int, List, Optional, Section, Str, Tagged
 from demcli.errors import InputError, StageError
 from demcli.stages import dem, loop
-from demcli.stages.asphalt.common import TEST_TIME
+from demcli.stages.asphalt.common import KINETIC_LIMIT_DOC, TEST_TIME, kinetic_ratio, quasi_static_warning
 from demcli.stages.relax import cycle_to_equilibrium, unbalanced
 from demcli.stages.base import ENGINE_KEEPS, ENGINE_OUTPUT, StageType, register_stage
 from demcli.stages.timing import time_step
@@ -56,6 +56,9 @@ for _name, _label, _table, _doc in [
         ("confining_stress", "Confining stress", "creep", "membrane pressure (0 uniaxial)"),
         ("isotropic_stress", "Isotropic stress", "prepare", "contact virial over the cylinder volume")]:
     describe_column(_name, _label, "Pa", "kPa", 1e-3, table=_table, doc=_doc)
+describe_column("height", "Specimen height", "m", "mm", 1e3, table="creep", doc="the platens' distance h")
+describe_column("radius", "Specimen radius", "m", "mm", 1e3, table="creep",
+                doc="the membrane's radius (triaxial) or the bonded outer layer's mean radius scaled to r0 (uniaxial)")
 describe_column("steps", "Steps", integer=True, table="prepare", doc="time steps cycled so far (cumulative)")
 
 register_group("bonded_specimen", "The prepared cylindrical specimen (seed 003)", writer="stage prepare")
@@ -291,6 +294,10 @@ def _creep_fields():
         "time": TEST_TIME,
         "dilation_window": List(Float(min=0), min_len=2, max_len=2, default=(0.01, 0.04),
                                 doc="distortional strains between which the dilation gradient is fitted"),
+        "quasi_static": Float(min=0, min_inclusive=False, default=0.01, doc=KINETIC_LIMIT_DOC),
+        "transient": Float(min=0, max=1, max_inclusive=False, default=0.05,
+                           doc="share of the duration after the step load whose rows the quasi-static check skips "
+                               "(the step rings for a few periods of the specimen's axial mode)"),
     })
     return f
 
@@ -318,6 +325,17 @@ def strains(h0, h, r0, r):
     ea = h / h0 - 1.0
     er = r / r0 - 1.0
     return ea, er, ea + 2.0 * er, abs(2.0 / 3.0 * (ea - er))
+
+
+def loading_work(axial_force, height, radius, sigma_3):
+    """Work done on a creep specimen per record row [J] (trapezoid over the rows): the top
+    platen's force F_a [N] through the shortening -dh of the height h [m], plus the confining
+    stress sigma_3 [Pa] through the lateral volume change, -sigma_3 2 pi r h dr (r [m] the
+    specimen's radius: the membrane's, or the bonded outer layer's when uniaxial, sigma_3 = 0)."""
+    fa, h, r = (np.asarray(a, float) for a in (axial_force, height, radius))
+    dw = 0.5 * (fa[1:] + fa[:-1]) * -np.diff(h)
+    dw -= sigma_3 * 2.0 * math.pi * 0.5 * (r[1:] * h[1:] + r[:-1] * h[:-1]) * np.diff(r)
+    return np.concatenate([[0.0], np.cumsum(dw)])
 
 
 def dilation_gradient(ed, ev, window):
@@ -375,7 +393,7 @@ def run_creep(ctx, cfg, state_in):
     shell = held & (rho0 > R0 - 2.0 * float(np.median(rad)))  # the bonded outer layer, one diameter thick
     r_ref = float(rho0[shell].mean())
     cols = {"axial_strain": "1", "radial_strain": "1", "volumetric_strain": "1", "distortional_strain": "1",
-            "axial_stress": "Pa", "confining_stress": "Pa"}
+            "axial_stress": "Pa", "confining_stress": "Pa", "height": "m", "radius": "m"}
 
     def measure(system):
         h = float(system.wpoint[1, 2] - system.wpoint[0, 2])
@@ -392,20 +410,26 @@ def run_creep(ctx, cfg, state_in):
         ea, er, ev, ed = strains(H0, h, r0, r_now)
         sa = float(-system.wforce[1] @ system.walls.normal[1]) / area
         return {"axial_strain": ea, "radial_strain": er, "volumetric_strain": ev, "distortional_strain": ed,
-                "axial_stress": sa, "confining_stress": s3}
+                "axial_stress": sa, "confining_stress": s3, "height": h, "radius": r_now * R0 / r0}
 
     def finish(ctx_, system, state, table):
         rows = table.to_arrays()
-        t = RecordTable("creep", {"time": "s", **cols})
+        work = loading_work(rows["axial_stress"] * area, rows["height"], rows["radius"], s3)
+        ratio = kinetic_ratio(rows["kinetic"], work)
+        i0 = int(np.searchsorted(rows["time"], rows["time"][0] + cfg.transient * cfg.duration))
+        worst = quasi_static_warning(ctx_, ratio[i0:], work[i0:], cfg.quasi_static,
+                                     "less mass scaling or a slower creep rate keeps the bodies' motion small")
+        t = RecordTable("creep", {"time": "s", **cols, "kinetic_to_work": "1"})
         for k in range(len(rows["time"])):
-            t.append({"time": rows["time"][k], **{n: rows[n][k] for n in cols}})
+            t.append({"time": rows["time"][k], **{n: rows[n][k] for n in cols}, "kinetic_to_work": ratio[k]})
         t.to_state(state)
         ctx_.write_records(t, x="time", ys=["axial_strain", "radial_strain", "volumetric_strain"])
         ctx_.write_records(t, x="distortional_strain", ys=["volumetric_strain"], suffix="dilation")
         slope = dilation_gradient(rows["distortional_strain"], rows["volumetric_strain"], cfg.dilation_window)
         state.groups["creep_result"] = {"sigma_1": np.float64(s1), "sigma_3": np.float64(s3),
                                         "dilation_gradient": np.float64(slope),
-                                        "final_axial_strain": np.float64(rows["axial_strain"][-1])}
+                                        "final_axial_strain": np.float64(rows["axial_strain"][-1]),
+                                        "kinetic_to_work": np.float64(worst)}
         state.groups["bonded_specimen"] = dict(state_in.groups["bonded_specimen"])
         ctx_.log(f"creep at sigma_1 {s1 / 1e3:.4g} kPa, sigma_3 {s3 / 1e3:.4g} kPa: axial strain "
                  f"{rows['axial_strain'][-1]:.4g} after {cfg.duration:g} s; dilation gradient {slope:.3g} "
@@ -418,8 +442,11 @@ def run_creep(ctx, cfg, state_in):
 register_group("creep_result", "Summary of a creep test (seed 003)", writer="stage creep")
 for _name, _unit, _doc in [("sigma_1", "Pa", "axial stress applied"), ("sigma_3", "Pa", "confining stress applied"),
                            ("dilation_gradient", "1", "d e_v / d e_d in the dilation window (NaN: not reached)"),
-                           ("final_axial_strain", "1", "axial strain at the end (tension positive)")]:
-    register(Field(f"creep_result/{_name}", "f", (), _unit, _doc, writer="stage creep"))
+                           ("final_axial_strain", "1", "axial strain at the end (tension positive)"),
+                           ("kinetic_to_work", "1", "largest kinetic energy / loading work over the rows after the "
+                            "transient, from the one where the work reaches 5 % of its largest (NaN: no work)")]:
+    register(Field(f"creep_result/{_name}", "f", (), _unit, _doc, writer="stage creep",
+                   required=_name != "kinetic_to_work"))  # states written before the check lack it
 
 register_stage(StageType(
     "creep", _creep_fields(), run_creep, needs_input=True, requires=("bonded_specimen/radius", "bonds/i"),
