@@ -42,8 +42,9 @@ def loaded_state(case, folder):
     return read_state(path)
 
 
-def loaded_system(case_path, state, threads):
-    """The sleeper stage's engine on ``state``, the sleeper at its constant peak load."""
+def loaded_system(case_path, state, threads, refresh=None):
+    """The sleeper stage's engine on ``state``, the sleeper at its constant peak load; ``refresh``: the
+    stage's contact.geometry_refresh replaced (None: the case's)."""
     import numba
     import numpy as np
 
@@ -57,6 +58,8 @@ def loaded_system(case_path, state, threads):
     cfg = case.stages[[s.name for s in case.stages].index("sleeper")]
     dcfg = dict(cfg)
     dcfg["time"] = Node({"steps": 1, "duration": None, "dt": cfg.time.dt, "dt_factor": cfg.time.dt_factor})
+    if refresh is not None:
+        dcfg["contact"] = Node({**dict(cfg.contact), "geometry_refresh": refresh})
     groups = dict(state.groups)
     act = dict(groups["actors"])
     down = np.array([0.0, 0.0, -1.0])
@@ -105,12 +108,14 @@ def main(argv=None):
     p.add_argument("--steps", type=int, default=200)
     p.add_argument("--repeat", type=int, default=3)
     p.add_argument("--threads", type=int, default=1)
+    p.add_argument("--refresh", type=int, default=None,
+                   help="contact.geometry_refresh of the bed (default: the case's; 1 is the exact law)")
     p.add_argument("--export", default=None, help="write the bed after the first 200 steps to this .npz and stop")
     a = p.parse_args(argv)
     name = Path(a.case).stem
     cache = Path(os.environ.get("DEMCLI_BENCH_CACHE", Path.home() / ".cache" / "demcli" / "bench")) / name
     state = loaded_state(a.case, cache)
-    s = loaded_system(a.case, state, a.threads)
+    s = loaded_system(a.case, state, a.threads, a.refresh)
     s.advance(200)  # the contacts take the peak load
     if a.export:
         export_bed(s, a.export)
@@ -126,7 +131,8 @@ def main(argv=None):
     pairs, walls = s.contact_count()
     med = statistics.median(rates)
     per_pair = len(s.mass) / med / max(pairs, 1)
-    print(f"{name} sleeper bed, {len(s.mass)} bodies, {a.threads} thread(s): {med:.4g} body-steps/s "
+    print(f"{name} sleeper bed, {len(s.mass)} bodies, {a.threads} thread(s), geometry refresh "
+          f"{s.model.geometry_refresh}: {med:.4g} body-steps/s "
           f"(runs {', '.join(f'{r:.4g}' for r in rates)}); {pairs} touching pairs ({2 * pairs / len(s.mass):.2f} "
           f"per body), {walls} wall contacts; {per_pair * 1e6:.3g} us per touching pair-step")
     print(f"particle_steps_per_s={med:.6g}")

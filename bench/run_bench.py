@@ -505,6 +505,9 @@ def run_loaded_bed(a, env0, yade, work):
     steps = ["--steps", "100", "--repeat", "1"] if a.quick else []
     runs = [(f"demcli t={t}", [sys.executable, os.path.join(HERE, "bench_loaded_bed.py"), "--threads", str(t)]
              + steps) for t in (1, 2)]
+    # the approximate option (contact.geometry_refresh, docs/ballast_box.md): exact every 8th step, linearized between
+    runs += [(f"demcli t={t}, geometry refresh 8", [sys.executable, os.path.join(HERE, "bench_loaded_bed.py"),
+                                                    "--threads", str(t), "--refresh", "8"] + steps) for t in (1, 2)]
     if yade:
         print(f"  [{time.strftime('%H:%M:%S')}] loaded bed: export for YADE ...", flush=True)
         rec = run_proc([sys.executable, os.path.join(HERE, "bench_loaded_bed.py"), "--export", bed], ROOT,

@@ -60,6 +60,7 @@ class ContactModel:
     no_tension: bool = False             # clip the normal force at 0 (kernels/contact.py)
     lever_arm: str = "deformed"          # 'deformed' (R - delta/2) or 'radius' (R)
     pairs: tuple = field(default_factory=tuple)  # ((mat_a, mat_b, {key: value}), ...)
+    geometry_refresh: int = 1            # polyhedra: exact intersection every k-th step, linearized between
 
 
 def damping_ratio(e):

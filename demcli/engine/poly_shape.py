@@ -26,7 +26,7 @@ from demcli.engine.materials import damping_ratio
 from demcli.engine.sphere_shape import _empty2, contacts_tuple, stored_contacts
 from demcli.kernels import layout as K
 from demcli.kernels.bonds import N_BTABLE
-from demcli.kernels.shapes.polyhedra import Q_MU
+from demcli.kernels.shapes.polyhedra import BOX_COLS, LINEAR_COLS, Q_MU
 from demcli.kernels.walls import MESH, PLANE
 
 # bounding radius = template circumradius x (1 + BOUND_PAD): round-off of the world transform
@@ -230,7 +230,7 @@ class PolyShape:
 
         vs, verts, fs, fvs, fv, fn, fo = s.shapes
         return PolyGeometry(s.rad, s.bmat, s.shape, vs, verts, fs, fvs, fv, fn, fo, s.bvstart, s.bfstart,
-                            *s.world)
+                            *s.world, s.model.geometry_refresh)
 
     @staticmethod
     def members(s):
@@ -254,9 +254,12 @@ class PolyShape:
         state written before contacts kept their depth seeds depth 0 (such a contact counts
         again once the resumed stage has stepped)."""
         nb = len(s.mass)
+        linear = s.model.geometry_refresh > 1
         cols = {"ft": (3, s.flags[K.F_FRICTION]), "mr": (3, False), "force": (3, True), "depth": (0, True),
-                "box": (6, True)}
+                "box": (BOX_COLS, True), "linearized": (LINEAR_COLS - BOX_COLS, linear)}
         start, ci, cj, rows = stored_contacts(groups.get("body_contacts", {}), "i", "j", nb, cols)
+        if linear:  # the kept exact evaluations beside the boxes (kernels.shapes.polyhedra.L_*)
+            rows["box"] = np.hstack([rows["box"], rows.pop("linearized")])
         wstart, wb, ww, wrows = stored_contacts(groups.get("body_wall_contacts", {}), "body", "wall", nb, cols,
                                                 len(s.walls))
         return contacts_tuple(start, ci, cj, rows, wstart, wb, ww, wrows, s.x.copy(), len(s.walls), True, True)
@@ -361,7 +364,9 @@ class PolyShape:
         nl = s.nl
         act = nl.act.astype(bool)
         contacts = {"i": nl.pi[act].copy(), "j": nl.pj[act].copy(), "force": nl.fc[act].copy(),
-                    "depth": nl.geo[act, G_DEPTH].copy(), "box": nl.pbox[act].copy()}
+                    "depth": nl.geo[act, G_DEPTH].copy(), "box": nl.pbox[act, :BOX_COLS].copy()}
+        if nl.pbox.shape[1] > BOX_COLS:
+            contacts["linearized"] = nl.pbox[act, BOX_COLS:].copy()
         if s.flags[K.F_FRICTION]:
             contacts["ft"] = nl.ft[act].copy()
         wgeo = nl.wgeo

@@ -81,7 +81,7 @@ def rebuild_lists(g, bd, nl, par, flags, wa, bonds, bprm, vol, pair_torque):
     nmr = np.zeros((npair if rolling else 0, 3))
     carry_history(ns, nstart, npj, nl.start, nl.pj, nl.ft, nft)
     carry_history(ns, nstart, npj, nl.start, nl.pj, nl.mr, nmr)
-    npbox = np.zeros((npair if vol else 0, 6))
+    npbox = np.zeros((npair if vol else 0, nl.pbox.shape[1]))  # the box (6) and a linearized geometry's
     carry_history(ns, nstart, npj, nl.start, nl.pj, nl.pbox, npbox)
     rstart, rlist = build_reverse(ns, npj)
     act = np.zeros(npair, np.uint8)

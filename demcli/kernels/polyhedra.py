@@ -402,8 +402,9 @@ def _faces_inside(v1, fs1, fv1, off1, n1, d1, planes, f0, nfaces1, n2, d2, p0, n
     band [m]: width of the regularization of S near same-facing faces of body 2
     (:func:`_band_deficit`; V and the centroid are exact): the planes of body 2 within
     band of the box that do not cut it are planes[q0], planes[q0 - 1], ... (nnear2).
-    buf (2 cap, 3): two polygon slots at rows 0 and cap. fw: box (0-5), scratch
-    (6-17), then from 18: cone origin o and a set flag (18-21), bounding box of the
+    buf (2 cap, 3): two polygon slots at rows 0 and cap. fw: box (0-5), the moments
+    int (p - o) x n dA of A's pieces (6-8) and of B's (9-11), scratch (12-17; 6-17 hold the
+    bodies' boxes before the clipping), then from 18: cone origin o and a set flag (18-21), bounding box of the
     pieces (22-27: min xyz, max xyz), V (28), first moment about o (29-31), S (32-34),
     number of pieces (35), then signed distances (36-). Flat offsets rather than
     slices: every array view costs two atomic reference-count updates.
@@ -558,6 +559,13 @@ def _faces_inside(v1, fs1, fv1, off1, n1, d1, planes, f0, nfaces1, n2, d2, p0, n
             bx = cx
             by = cy
             bz = cz
+        # the piece's moment of its area vector about o, int (p - o) x n dA = (first moment of its area
+        # about o, m / 6) x n, into fw[6:9] (body 1 = A) or fw[9:12] (B): the rotational part of dV
+        # (a linearized geometry, kernels.shapes.polyhedra._linear_volume)
+        t0 = 6 if first else 9
+        fw[t0] += (my * fnz - mz * fny) / 6.0
+        fw[t0 + 1] += (mz * fnx - mx * fnz) / 6.0
+        fw[t0 + 2] += (mx * fny - my * fnx) / 6.0
         vol = h * area2 / 6.0
         mx *= h / 24.0
         my *= h / 24.0
@@ -760,6 +768,8 @@ def _clip_in_box(va, fsa, fva, offa, na, da, vb, fsb, fvb, offb, nb, db, ux, uy,
     if ncb < 0:
         return False
     for k in range(18, 36):
+        fw[k] = 0.0
+    for k in range(6, 12):
         fw[k] = 0.0
     for c in range(3):
         fw[22 + c] = np.inf

@@ -202,6 +202,11 @@ FIELDS = {
                              "delta/2; R - delta on a wall); radius, at R from the centre as in rigid-body "
                              "impact theory"),
         "pairs": List(CONTACT_PAIR, default=(), doc="per material pair overrides"),
+        "geometry_refresh": Int(min=1, default=1,
+                                doc="polyhedra: a touching pair's intersection is computed exactly every this many "
+                                    "steps and linearized in between (V = V_0 - S_0 . relative displacement of the "
+                                    "contact point); 1: every step, the exact law (an approximation above 1, its "
+                                    "cost measured in docs/ballast_box.md, Cost)"),
     }, default={}),
     "walls": List(WALL, default=(), doc="rigid walls"),
     "bonds": BONDS,
@@ -364,6 +369,10 @@ def scene_check(cfg, case, k, scene, report, shapes=None):
     if cfg.get("output") is not None and cfg.output.get("packing") is not None and set(shapes) == {"mixed"}:
         report("output.packing", "is for sphere, clump and polyhedron scenes, not yet for spheres with polyhedra")
     _measure_check(cfg, case, shapes, report)
+    refresh = cfg.get("contact", {}).get("geometry_refresh", 1)
+    if refresh > 1 and "polyhedra" not in shapes:
+        report("contact.geometry_refresh", "is for polyhedron scenes (the linearized geometry of polyhedron pairs)",
+               refresh)
     if set(shapes) <= {"polyhedra", "mixed"}:
         for k, w in enumerate(cfg.get("walls", ())):
             if w.type == "cylinder":
@@ -421,7 +430,8 @@ def contact_model(cfg):
     kn = (c.kn or 0.0) * s
     kt = c.kt * s if c.kt is not None else kn / 4.0
     return ContactModel(law=c.law, kn=kn, kt=kt, cn=c.cn, tangential_damping=c.tangential_damping,
-                        no_tension=c.no_tension, lever_arm=c.lever_arm, pairs=pairs)
+                        no_tension=c.no_tension, lever_arm=c.lever_arm, pairs=pairs,
+                        geometry_refresh=c.get("geometry_refresh", 1))
 
 
 def case_materials(case, stiffness=1.0):

@@ -80,7 +80,11 @@ for _name, _kind, _dims, _unit, _doc, _kw in [
          {"required": False, "finite": True}),
         ("box", "f", ("n_bc", 6), "m", "bounding box of the intersection at the last evaluation (low xyz, high "
          "xyz): the next step's culling box (temporal coherence: the result is the same with or without it, up to round-off)",
-         {"required": False, "finite": True})]:
+         {"required": False, "finite": True}),
+        ("linearized", "f", ("n_bc", 28), "", "with contact.geometry_refresh > 1: the last exact evaluation kept for "
+         "the linearized steps: V [m^3], S [m^2], centroid g [m], the moments T_i, T_j [m^3], bodies i's and j's "
+         "positions [m] and orientations then, steps left before the next exact one "
+         "(demcli.kernels.shapes.polyhedra._linear_volume)", {"required": False, "finite": True})]:
     register(Field(f"body_contacts/{_name}", _kind, _dims, _unit, _doc, writer="engine (polyhedra)", **_kw))
 
 register_group("body_wall_contacts", "Persistent polyhedron-wall contacts with their history",

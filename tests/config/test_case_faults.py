@@ -291,6 +291,12 @@ def test_physics_the_scene_cannot_take_is_refused(tmp_path):
              "corrects spheres for the shape they lack")
 
 
+def test_a_linearized_geometry_is_refused_on_spheres(tmp_path):
+    # (contact.geometry_refresh linearizes the intersection of polyhedron pairs; spheres have none)
+    text = GOOD.replace("time: {steps: 10}", "time: {steps: 10}\n    contact: {geometry_refresh: 4}")
+    _refused(_check(tmp_path, text)[0], "stages[1].contact.geometry_refresh: is for polyhedron scenes")
+
+
 def test_run_refuses_before_the_first_stage_runs(tmp_path):
     # Given a valid first stage and a second whose input it cannot provide
     path = tmp_path / "case.yaml"

@@ -369,3 +369,36 @@ def test_interrupted_sleeper_stage_resumes_bit_identically(chain, tmp_path, h5_d
     interrupt_and_resume(System, 12000, SMOKE, tmp_path, "05-sleeper.ckpt.h5")
     # Then: the sleeper state equals the uninterrupted run's, dataset for dataset
     assert h5_differences(chain / "05-sleeper.h5", tmp_path / "05-sleeper.h5") == []
+
+
+def test_a_linearized_sleeper_stage_resumes_bit_identically(chain, tmp_path, h5_differences, interrupt_and_resume):
+    import shutil
+
+    import h5py
+
+    from demcli.engine.system import System
+    from demcli.kernels.shapes.polyhedra import BOX_COLS, L_LEFT
+
+    # Given: the smoke chain's vibrated bed and its sleeper stage with the touching pairs' geometry evaluated
+    # exactly every 4th step and linearized in between (contact.geometry_refresh, issue #30)
+    text = SMOKE.read_text()
+    old = "    cycles: 1\n    output: {snapshots: 1}"
+    assert text.count(old) == 1
+    case = tmp_path / "ballast_box_smoke.yaml"
+    case.write_text(text.replace(old, "    cycles: 1\n    contact: {geometry_refresh: 4}\n    output: {snapshots: 1}"))
+    straight, resumed = tmp_path / "straight", tmp_path / "resumed"
+    for out in (straight, resumed):
+        out.mkdir()
+        for f in chain.iterdir():
+            if f.name[:2] in ("00", "01", "02", "03", "04"):
+                shutil.copy(f, out / f.name)
+    # When: run straight through, and interrupted in the load cycle then resumed
+    run_case(case, out=straight, quiet=True)
+    interrupt_and_resume(System, 12000, case, resumed, "05-sleeper.ckpt.h5")
+    # Then: both end in the same state, dataset for dataset, which keeps each touching pair's last exact
+    # evaluation and its count of linearized steps left (0-3: pairs at every phase of the refresh)
+    assert h5_differences(straight / "05-sleeper.h5", resumed / "05-sleeper.h5") == []
+    with h5py.File(straight / "05-sleeper.h5") as f:
+        kept = f["body_contacts/linearized"][()]
+    left = kept[:, L_LEFT - BOX_COLS]  # the stored columns follow the box's
+    assert len(kept) > 20 and set(np.unique(left)) == {0.0, 1.0, 2.0, 3.0}

@@ -191,9 +191,10 @@ def pair_pass(g, bd, nl, prm, law, flags, dt, frow, trow, erow, bonds, bprm, bro
         trow[:ns, :] = 0.0
     _sphere_poly_forces(nl.start, nl.pj, ns, sg, pg, prm, law, dt, nl.ft, nl.mr, friction, rolling, energy, nl.fc,
                         nl.tj, nl.act, nl.epair, frow, trow, erow)
-    P._pair_forces(nl.start, nl.pj, sg.xs, sg.vs, sg.ws, sg.smass, pg.rad, pg.mat, g.qprm, flags, dt, pg.shape,
-                   pg.vertex_start, pg.face_start, pg.fvstart, pg.fverts, pg.bvstart, pg.bfstart, pg.wvert, pg.wnorm,
-                   pg.woff, nl.ft, nl.fc, nl.tj, nl.act, nl.epair, nl.geo, frow, trow, erow, nl.sep, nl.sdir, nl.sclear, nl.pbox, pg.travel, ns)
+    P._pair_forces(nl.start, nl.pj, sg.xs, sg.vs, sg.ws, bd.q, sg.smass, pg.rad, pg.mat, g.qprm, flags, dt,
+                   pg.shape, pg.vertex_start, pg.face_start, pg.fvstart, pg.fverts, pg.bvstart, pg.bfstart, pg.wvert,
+                   pg.wnorm, pg.woff, nl.ft, nl.fc, nl.tj, nl.act, nl.epair, nl.geo, frow, trow, erow, nl.sep, nl.sdir,
+                   nl.sclear, nl.pbox, pg.travel, ns, 1)
 
 
 @njit

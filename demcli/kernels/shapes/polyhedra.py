@@ -42,19 +42,20 @@ from demcli.kernels.layout import F_DASHPOT, F_ENERGY, F_FRICTION
 from demcli.kernels.poly_mesh import R_GX, R_NX, R_SX, R_V, mesh_pieces, plane_sums, scratch_for
 from demcli.kernels.polyhedra import (BOX_PAD, contact_frame, max_row, overlap_in_box, overlap_ws, plane_overlap_ws,
                                       plane_scratch, scratch, to_world_planes)
-from demcli.kernels.quat import rotate
+from demcli.kernels.quat import mul, rotate
 from demcli.kernels.separation import gap, separating_direction
 from demcli.kernels.walls import MESH
 
 PolyGeometry = namedtuple("PolyGeometry", "rad mat shape vertex_start vertices face_start fvstart fverts "
-                                          "face_normal face_offset bvstart bfstart wvert wnorm woff travel")
+                                          "face_normal face_offset bvstart bfstart wvert wnorm woff travel refresh")
 """Polyhedra: rad (n_b,) bounding radius about the centroid [m]; mat (n_b,) material; shape (n_b,)
 template of each body; vertex_start .. face_offset: the polyhedron_shapes CSR tables (body frame);
 bvstart, bfstart (n_b + 1,) each body's rows of the world arrays wvert (n_v, 3), wnorm (n_f, 3),
 woff (n_f,) (rewritten every step); travel (n_b,) [m]: each body's travel so far, the sum over
 steps of its largest vertex displacement (a bound on how far any of its points has moved since
 an earlier step: the displacement of a rigid motion is affine in the point, its norm largest at
-a vertex)."""
+a vertex); refresh (int): a touching pair's geometry is evaluated exactly every refresh-th step,
+linearized in between (contact.geometry_refresh; 1: every step, the exact law)."""
 
 # columns of the material-pair table prm[a, b, :]
 Q_KN = 0      # k_n = 4 E / (3 sqrt(pi)) [Pa]
@@ -75,6 +76,13 @@ SEP_MARGIN = 1e-9  # a cached face or direction must clear by this x (r_i + r_j)
 # columns of geo / wgeo (per contact, last evaluation): depth d [m], elastic normal force F_N [N],
 # tangential stiffness K_t [N/m]
 G_DEPTH, G_FN, G_KT = 0, 1, 2
+# pbox columns: the culling box (0-5); with contact.geometry_refresh k > 1 also the last exact
+# evaluation's V [m^3] (L_V), S [m^2] (L_S), centroid g [m] (L_G), the moments T_i, T_j [m^3] (L_TI,
+# L_TJ), both bodies' positions [m] (L_XI, L_XJ) and orientations (L_QI, L_QJ) then, and the linearized
+# steps left before the next exact one (L_LEFT); see _linear_volume
+BOX_COLS = 6
+L_V, L_S, L_G, L_TI, L_TJ, L_XI, L_XJ, L_QI, L_QJ, L_LEFT = 6, 7, 10, 13, 16, 19, 22, 25, 29, 33
+LINEAR_COLS = 34
 
 
 
@@ -217,10 +225,93 @@ def _face_gap(code, na, da, va, nb_, db_, vb, margin):
     return g
 
 
+@njit(inline="always")
+def _turn(q, b, pbox, c, k):
+    """Rotation vector [rad] of body b since its orientation kept in pbox[c, k:k + 4]: 2 vec(q q_0*),
+    the sign of q q_0* taken with w >= 0 (first order in the angle, as the expansion it enters)."""
+    w, x, y, z = mul(q[b, 0], q[b, 1], q[b, 2], q[b, 3], pbox[c, k], -pbox[c, k + 1], -pbox[c, k + 2], -pbox[c, k + 3])
+    s = 2.0 if w >= 0.0 else -2.0
+    return s * x, s * y, s * z
+
+
+@njit(inline="always")
+def _linear_volume(pbox, c, x, q, i, j):
+    """Overlap volume of pair c linearized about its last exact evaluation (contact.geometry_refresh).
+
+    V is expanded to first order in the rigid motions of both bodies since that evaluation
+    (translations dx_i, dx_j [m], rotation vectors phi_i, phi_j [rad] about their centroids then):
+
+        V = V_0 - S . dx_i + S . dx_j + phi_i . T_i + phi_j . T_j,
+
+    S = -dV/dx_i [m^2] (:mod:`demcli.kernels.polyhedra`) and T_b = int (p - x_b) x n_b dA [m^3] over
+    body b's part of the intersection's boundary (n_b its outward normal), the rotational
+    derivative: turning b by phi moves that boundary by phi x (p - x_b), along n_b by phi . ((p - x_b)
+    x n_b). Returns (V, contact point), the point the centroid g_0 moved to with the bodies (the mean of
+    g_0 carried by each). Between two exact evaluations the force U'(V) S is the gradient of U(V(x)) in
+    translation, so the law stays conservative; what is left out is the change of S, T and g over
+    the k steps (second order in the motion).
+    """
+    pix, piy, piz = _turn(q, i, pbox, c, L_QI)
+    pjx, pjy, pjz = _turn(q, j, pbox, c, L_QJ)
+    dix = x[i, 0] - pbox[c, L_XI]
+    diy = x[i, 1] - pbox[c, L_XI + 1]
+    diz = x[i, 2] - pbox[c, L_XI + 2]
+    djx = x[j, 0] - pbox[c, L_XJ]
+    djy = x[j, 1] - pbox[c, L_XJ + 1]
+    djz = x[j, 2] - pbox[c, L_XJ + 2]
+    vol = (pbox[c, L_V] - pbox[c, L_S] * (dix - djx) - pbox[c, L_S + 1] * (diy - djy) - pbox[c, L_S + 2] * (diz - djz)
+           + pix * pbox[c, L_TI] + piy * pbox[c, L_TI + 1] + piz * pbox[c, L_TI + 2]
+           + pjx * pbox[c, L_TJ] + pjy * pbox[c, L_TJ + 1] + pjz * pbox[c, L_TJ + 2])
+    # g_0 carried by i: g_0 + dx_i + phi_i x (g_0 - x_i0); by j likewise; their mean
+    rix = pbox[c, L_G] - pbox[c, L_XI]
+    riy = pbox[c, L_G + 1] - pbox[c, L_XI + 1]
+    riz = pbox[c, L_G + 2] - pbox[c, L_XI + 2]
+    rjx = pbox[c, L_G] - pbox[c, L_XJ]
+    rjy = pbox[c, L_G + 1] - pbox[c, L_XJ + 1]
+    rjz = pbox[c, L_G + 2] - pbox[c, L_XJ + 2]
+    gx = pbox[c, L_G] + 0.5 * (dix + djx + (piy * riz - piz * riy) + (pjy * rjz - pjz * rjy))
+    gy = pbox[c, L_G + 1] + 0.5 * (diy + djy + (piz * rix - pix * riz) + (pjz * rjx - pjx * rjz))
+    gz = pbox[c, L_G + 2] + 0.5 * (diz + djz + (pix * riy - piy * rix) + (pjx * rjy - pjy * rjx))
+    return vol, gx, gy, gz
+
+
+@njit(inline="always")
+def _store_linear(pbox, c, x, q, i, j, vol, gx, gy, gz, sx, sy, sz, fw, refresh):
+    """Keep pair c's exact evaluation for the next refresh - 1 steps: V, S, g, both bodies' positions and
+    orientations, and their moments T_b about their centroids from fw (fw[6:9] and fw[9:12]: about the
+    clipping's cone origin o = fw[18:21], :func:`demcli.kernels.polyhedra._faces_inside`), T_b = T_b(o) -
+    (x_b - o) x S_b with S_i = -S, S_j = S (the two bodies' area vectors, equal and opposite)."""
+    pbox[c, L_V] = vol
+    pbox[c, L_S] = sx
+    pbox[c, L_S + 1] = sy
+    pbox[c, L_S + 2] = sz
+    pbox[c, L_G] = gx
+    pbox[c, L_G + 1] = gy
+    pbox[c, L_G + 2] = gz
+    _store_body(pbox, c, x, q, i, L_XI, L_QI, L_TI, fw, 6, -sx, -sy, -sz)
+    _store_body(pbox, c, x, q, j, L_XJ, L_QJ, L_TJ, fw, 9, sx, sy, sz)
+    pbox[c, L_LEFT] = refresh - 1
+
+
+@njit(inline="always")
+def _store_body(pbox, c, x, q, b, kx, kq, kt, fw, t0, sx, sy, sz):
+    """Body b's position, orientation and moment T_b = T_b(o) - (x_b - o) x S_b (S_b = (sx, sy, sz))."""
+    rx = x[b, 0] - fw[18]
+    ry = x[b, 1] - fw[19]
+    rz = x[b, 2] - fw[20]
+    pbox[c, kt] = fw[t0] - (ry * sz - rz * sy)
+    pbox[c, kt + 1] = fw[t0 + 1] - (rz * sx - rx * sz)
+    pbox[c, kt + 2] = fw[t0 + 2] - (rx * sy - ry * sx)
+    for k in range(3):
+        pbox[c, kx + k] = x[b, k]
+    for k in range(4):
+        pbox[c, kq + k] = q[b, k]
+
+
 @njit(parallel=True, internal=True)
-def _pair_forces(start, pj, x, v, w, mass, rad, bmat, prm, sw, dt,
+def _pair_forces(start, pj, x, v, w, q, mass, rad, bmat, prm, sw, dt,
                  shape, vertex_start, face_start, fvstart, fverts, bvstart, bfstart, wvert, wnorm, woff,
-                 ft, fc, tj, act, epair, geo, frow, trow, erow, sep, sdir, sclear, pbox, travel, r0):
+                 ft, fc, tj, act, epair, geo, frow, trow, erow, sep, sdir, sclear, pbox, travel, r0, refresh):
     """Force of every listed pair into its own row; the row owner i sums its side; rows from
     ``r0`` (0; a mixed scene: its polyhedra, :mod:`demcli.kernels.shapes.mixed`).
 
@@ -236,8 +327,12 @@ def _pair_forces(start, pj, x, v, w, mass, rad, bmat, prm, sw, dt,
     pbox[c] (6): the bounding box of pair c's intersection at its last evaluation (zeros: none, the
     pair did not touch); a touching pair is evaluated in that box widened by BOX_PAD min(r_i, r_j)
     (:func:`overlap_in_box`, exact when I stays inside it; else the full :func:`overlap_ws`).
+    refresh (contact.geometry_refresh, pbox of LINEAR_COLS columns; else 1): a touching pair is evaluated
+    exactly every refresh-th step and linearized in between (:func:`_linear_volume`; q: the bodies'
+    orientations), or at once when its linearized V is not positive.
     """
     friction = sw[F_FRICTION]
+    linear = pbox.shape[1] > BOX_COLS
     energy = sw[F_ENERGY]
     dashpot = sw[F_DASHPOT]
     # scratch of overlap_ws for any pair of these shapes: largest face, most faces
@@ -284,13 +379,22 @@ def _pair_forces(start, pj, x, v, w, mass, rad, bmat, prm, sw, dt,
                     rs = ri + rj
                     vol = 0.0
                     gx = gy = gz = sx = sy = sz = 0.0
+                    exact = True  # False: linearized about the kept evaluation (refresh > 1)
                     if dx * dx + dy * dy + dz * dz < rs * rs:
                         kj = shape[j]
                         vb = wvert[bvstart[j]:bvstart[j + 1]]
                         nb_ = wnorm[bfstart[j]:bfstart[j + 1]]
                         db_ = woff[bfstart[j]:bfstart[j + 1]]
                         fsb = fvstart[face_start[kj]:face_start[kj + 1] + 1]
-                        if pbox[c, 3] > pbox[c, 0]:  # touching at the last evaluation: coherent culling
+                        if linear and pbox[c, 3] > pbox[c, 0] and pbox[c, L_LEFT] > 0.0:
+                            vol, gx, gy, gz = _linear_volume(pbox, c, x, q, i, j)
+                            if vol > 0.0:
+                                exact = False
+                                sx = pbox[c, L_S]
+                                sy = pbox[c, L_S + 1]
+                                sz = pbox[c, L_S + 2]
+                                pbox[c, L_LEFT] -= 1.0
+                        if exact and pbox[c, 3] > pbox[c, 0]:  # touching at the last evaluation: coherent culling
                             pad = BOX_PAD * min(ri, rj)
                             for k in range(3):
                                 box[k] = pbox[c, k] - pad
@@ -302,7 +406,7 @@ def _pair_forces(start, pj, x, v, w, mass, rad, bmat, prm, sw, dt,
                                 vol, gx, gy, gz, sx, sy, sz = overlap_ws(
                                     va, fsa, fverts, offa, na, da, xi0, xi1, xi2, ri,
                                     vb, fsb, fverts, vertex_start[kj], nb_, db_, xj0, xj1, xj2, rj, buf, fw, planes)
-                        else:
+                        elif exact:
                             code = sep[c]
                             margin = SEP_MARGIN * rs + 1e-12 * max(abs(xi0), abs(xi1), abs(xi2), abs(xj0), abs(xj1),
                                                                   abs(xj2))
@@ -358,9 +462,13 @@ def _pair_forces(start, pj, x, v, w, mass, rad, bmat, prm, sw, dt,
                                             sep[c] = SEP_NONE
                                 elif vol > 0.0:
                                     sep[c] = 0
-                    if vol > 0.0:  # the pieces' box of this evaluation (fw[22:28]): the next step's culling box
+                    if not exact:  # linearized: the box and the kept evaluation stay
+                        pass
+                    elif vol > 0.0:  # the pieces' box of this evaluation (fw[22:28]): the next step's culling box
                         for k in range(6):
                             pbox[c, k] = fw[22 + k]
+                        if linear:
+                            _store_linear(pbox, c, x, q, i, j, vol, gx, gy, gz, sx, sy, sz, fw, refresh)
                     elif pbox[c, 3] != 0.0 or pbox[c, 0] != 0.0:
                         for k in range(6):
                             pbox[c, k] = 0.0
@@ -453,9 +561,10 @@ def primitives(g, bd):
 @njit
 def pair_pass(g, bd, nl, prm, law, flags, dt, frow, trow, erow, bonds, bprm, broke):
     """Every listed pair's force into its own row (bonds do not join polyhedra)."""
-    _pair_forces(nl.start, nl.pj, bd.x, bd.v, bd.w, bd.mass, g.rad, g.mat, prm, flags, dt,
+    _pair_forces(nl.start, nl.pj, bd.x, bd.v, bd.w, bd.q, bd.mass, g.rad, g.mat, prm, flags, dt,
                  g.shape, g.vertex_start, g.face_start, g.fvstart, g.fverts, g.bvstart, g.bfstart, g.wvert, g.wnorm,
-                 g.woff, nl.ft, nl.fc, nl.tj, nl.act, nl.epair, nl.geo, frow, trow, erow, nl.sep, nl.sdir, nl.sclear, nl.pbox, g.travel, 0)
+                 g.woff, nl.ft, nl.fc, nl.tj, nl.act, nl.epair, nl.geo, frow, trow, erow, nl.sep, nl.sdir, nl.sclear,
+                 nl.pbox, g.travel, 0, g.refresh)
 
 
 @njit
