@@ -31,6 +31,11 @@ from types import SimpleNamespace
 HERE = Path(__file__).resolve().parent
 
 
+def cache_folder(case):
+    """Where the bed of ``case`` is built and kept (``$DEMCLI_BENCH_CACHE/<case name>``)."""
+    return Path(os.environ.get("DEMCLI_BENCH_CACHE", Path.home() / ".cache" / "demcli" / "bench")) / Path(case).stem
+
+
 def loaded_state(case, folder):
     """The sleeper stage's final state of ``case`` (run once into ``folder``)."""
     from demcli import run_case
@@ -113,8 +118,7 @@ def main(argv=None):
     p.add_argument("--export", default=None, help="write the bed after the first 200 steps to this .npz and stop")
     a = p.parse_args(argv)
     name = Path(a.case).stem
-    cache = Path(os.environ.get("DEMCLI_BENCH_CACHE", Path.home() / ".cache" / "demcli" / "bench")) / name
-    state = loaded_state(a.case, cache)
+    state = loaded_state(a.case, cache_folder(a.case))
     s = loaded_system(a.case, state, a.threads, a.refresh)
     s.advance(200)  # the contacts take the peak load
     if a.export:
