@@ -123,7 +123,7 @@ class MixedShape:
         vs, verts, fs, fvs, fv, fn, fo = s.shapes
         return MixedGeometry(SphereGeometry(s.xs, s.vs, s.ws, s.rad, s.smat, s.smass, s.sbody, s.soff, None),
                              PolyGeometry(s.rad, s.smat, s.shape, vs, verts, fs, fvs, fv, fn, fo, s.bvstart,
-                                          s.bfstart, *s.world, 1), s.ns, s.qprm)
+                                          s.bfstart, *s.world, None), s.ns, s.qprm)
 
     @staticmethod
     def members(s):

@@ -230,7 +230,7 @@ class PolyShape:
 
         vs, verts, fs, fvs, fv, fn, fo = s.shapes
         return PolyGeometry(s.rad, s.bmat, s.shape, vs, verts, fs, fvs, fv, fn, fo, s.bvstart, s.bfstart,
-                            *s.world, s.model.geometry_refresh)
+                            *s.world, s.model.geometry_refresh if s.model.geometry_refresh > 1 else None)
 
     @staticmethod
     def members(s):

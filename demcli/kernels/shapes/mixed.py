@@ -194,7 +194,7 @@ def pair_pass(g, bd, nl, prm, law, flags, dt, frow, trow, erow, bonds, bprm, bro
     P._pair_forces(nl.start, nl.pj, sg.xs, sg.vs, sg.ws, bd.q, sg.smass, pg.rad, pg.mat, g.qprm, flags, dt,
                    pg.shape, pg.vertex_start, pg.face_start, pg.fvstart, pg.fverts, pg.bvstart, pg.bfstart, pg.wvert,
                    pg.wnorm, pg.woff, nl.ft, nl.fc, nl.tj, nl.act, nl.epair, nl.geo, frow, trow, erow, nl.sep, nl.sdir,
-                   nl.sclear, nl.pbox, pg.travel, ns, 1)
+                   nl.sclear, nl.pbox, pg.travel, ns, None)
 
 
 @njit

@@ -55,7 +55,8 @@ woff (n_f,) (rewritten every step); travel (n_b,) [m]: each body's travel so far
 steps of its largest vertex displacement (a bound on how far any of its points has moved since
 an earlier step: the displacement of a rigid motion is affine in the point, its norm largest at
 a vertex); refresh (int): a touching pair's geometry is evaluated exactly every refresh-th step,
-linearized in between (contact.geometry_refresh; 1: every step, the exact law)."""
+linearized in between (contact.geometry_refresh > 1); None: every step, the exact law (the linearized
+path is not compiled)."""
 
 # columns of the material-pair table prm[a, b, :]
 Q_KN = 0      # k_n = 4 E / (3 sqrt(pi)) [Pa]
@@ -327,12 +328,12 @@ def _pair_forces(start, pj, x, v, w, q, mass, rad, bmat, prm, sw, dt,
     pbox[c] (6): the bounding box of pair c's intersection at its last evaluation (zeros: none, the
     pair did not touch); a touching pair is evaluated in that box widened by BOX_PAD min(r_i, r_j)
     (:func:`overlap_in_box`, exact when I stays inside it; else the full :func:`overlap_ws`).
-    refresh (contact.geometry_refresh, pbox of LINEAR_COLS columns; else 1): a touching pair is evaluated
-    exactly every refresh-th step and linearized in between (:func:`_linear_volume`; q: the bodies'
-    orientations), or at once when its linearized V is not positive.
+    refresh (contact.geometry_refresh > 1, pbox of LINEAR_COLS columns; None: the exact law, and numba
+    compiles the pass without the linearized path): a touching pair is evaluated exactly every
+    refresh-th step and linearized in between (:func:`_linear_volume`; q: the bodies' orientations), or
+    at once when its linearized V is not positive.
     """
     friction = sw[F_FRICTION]
-    linear = pbox.shape[1] > BOX_COLS
     energy = sw[F_ENERGY]
     dashpot = sw[F_DASHPOT]
     # scratch of overlap_ws for any pair of these shapes: largest face, most faces
@@ -386,14 +387,15 @@ def _pair_forces(start, pj, x, v, w, q, mass, rad, bmat, prm, sw, dt,
                         nb_ = wnorm[bfstart[j]:bfstart[j + 1]]
                         db_ = woff[bfstart[j]:bfstart[j + 1]]
                         fsb = fvstart[face_start[kj]:face_start[kj + 1] + 1]
-                        if linear and pbox[c, 3] > pbox[c, 0] and pbox[c, L_LEFT] > 0.0:
-                            vol, gx, gy, gz = _linear_volume(pbox, c, x, q, i, j)
-                            if vol > 0.0:
-                                exact = False
-                                sx = pbox[c, L_S]
-                                sy = pbox[c, L_S + 1]
-                                sz = pbox[c, L_S + 2]
-                                pbox[c, L_LEFT] -= 1.0
+                        if refresh is not None:  # compiled only for contact.geometry_refresh > 1
+                            if pbox[c, 3] > pbox[c, 0] and pbox[c, L_LEFT] > 0.0:
+                                vol, gx, gy, gz = _linear_volume(pbox, c, x, q, i, j)
+                                if vol > 0.0:
+                                    exact = False
+                                    sx = pbox[c, L_S]
+                                    sy = pbox[c, L_S + 1]
+                                    sz = pbox[c, L_S + 2]
+                                    pbox[c, L_LEFT] -= 1.0
                         if exact and pbox[c, 3] > pbox[c, 0]:  # touching at the last evaluation: coherent culling
                             pad = BOX_PAD * min(ri, rj)
                             for k in range(3):
@@ -467,7 +469,7 @@ def _pair_forces(start, pj, x, v, w, q, mass, rad, bmat, prm, sw, dt,
                     elif vol > 0.0:  # the pieces' box of this evaluation (fw[22:28]): the next step's culling box
                         for k in range(6):
                             pbox[c, k] = fw[22 + k]
-                        if linear:
+                        if refresh is not None:
                             _store_linear(pbox, c, x, q, i, j, vol, gx, gy, gz, sx, sy, sz, fw, refresh)
                     elif pbox[c, 3] != 0.0 or pbox[c, 0] != 0.0:
                         for k in range(6):
