@@ -117,6 +117,7 @@ def test_lattice_cube_pulled_apart_fails_at_the_stone_tensile_strength():
     # in tension, all the n^2 bonds of one layer together (the columns are alike)
     c = s.bonds.counts()
     assert c["broken_shear"] == 0 and c["broken_tension"] % (n * n) == 0 and c["broken_tension"] > 0
+    assert s.bonds.internal_counts() == c   # all of them inside the aggregate
     # and before that the cube stretched as the stone: P / u = E (nL)^2 / ((n - 1) L) within 2 %
     half = load < 0.5 * load.max()
     slope = np.polyfit(speed * t[half & (load > 0.1 * load.max())], load[half & (load > 0.1 * load.max())], 1)[0]
