@@ -39,7 +39,9 @@ Reads a cut specimen (``specimen`` and ``aggregates`` groups) and:
    group): aggregate-aggregate ``linear_slip`` (linear springs, Coulomb slip),
    aggregate-mastic ``contact_bond`` (adhesion strengths s2n, s2t as forces),
    mastic-mastic ``parallel_bond`` (cohesion strengths s1n, s1t as stresses, bond
-   stiffness per area and radius multiplier); inside an aggregate: the rigid clump.
+   stiffness per area and radius multiplier); inside an aggregate (``aggregates``): the rigid
+   clump (default), or parallel bonds between its lattice balls, which a test stage makes
+   (:mod:`demcli.stages.asphalt.bonded`: bonded aggregates whose bonds break).
    Any model may be given to any pair; every pair needs exactly one, and every model
    its stiffnesses and strengths (a missing pair or strength is a config error, and
    :func:`phase_table` re-validates a stored table).
