@@ -21,7 +21,9 @@ register_group("bond_models", "Bond models by material pair (contact, parallel a
                writer="effect bonds")
 for _name, _kind, _dims, _unit, _doc in [
         ("kind", "str", ("n_bm",), "", "contact_bond, parallel_bond or burgers"),
-        ("materials", "i", ("n_bm", 2), "", "the material pair the model bonds (a <= b)"),
+        ("materials", "i", ("n_bm", 2), "", "the material pair the model bonds (a <= b); (-1, -1): bonds inside "
+                                             "an aggregate (INTERNAL, bonded by lattice neighbourhood, not by "
+                                             "material)"),
         ("param_names", "str", ("n_bp",), "", "columns of params"),
         ("params", "f", ("n_bm", "n_bp"), "SI", "model parameters (columns B_* of demcli.kernels.bonds; inf: "
                                                  "no strength)")]:
@@ -58,6 +60,10 @@ _HIST_FIELDS = (("force_n", B.H_FN, 1), ("force_s", B.H_FS, 3), ("moment_t", B.H
                 ("kelvin_n", B.H_UKN, 1), ("kelvin_s", B.H_UKS, 3), ("separation", B.H_SEP, 1),
                 ("overlap0", B.H_D0, 1))
 _EMPTY_I = np.zeros(0, np.int64)
+INTERNAL = -1
+"""The material index of a model row for bonds inside an aggregate (bonded aggregates of
+the 3D asphalt chain, :mod:`demcli.stages.asphalt.bonded`): no material pair selects it, so
+bonding touching pairs by material never uses it."""
 
 
 def model_row(kind, **params):
@@ -186,6 +192,28 @@ class BondSet:
                 "broken_tension": int(np.sum(self.state == B.BROKEN_TENSION)),
                 "broken_shear": int(np.sum(self.state == B.BROKEN_SHEAR))}
 
+    def internal(self):
+        """(n_bd,) bool: bonds of an INTERNAL model row (inside an aggregate)."""
+        rows = self.materials[:, 0] == INTERNAL
+        return rows[self.model] if len(self.j) else np.zeros(0, bool)
+
+    def internal_counts(self):
+        """{intact, broken_tension, broken_shear} of the bonds inside aggregates."""
+        inside = self.internal()
+        return {"intact": int(np.sum(inside & (self.state == B.INTACT))),
+                "broken_tension": int(np.sum(inside & (self.state == B.BROKEN_TENSION))),
+                "broken_shear": int(np.sum(inside & (self.state == B.BROKEN_SHEAR)))}
+
+    def internal_model(self, row):
+        """The model row index of the INTERNAL model ``row`` (model_row), added or replaced."""
+        hit = np.flatnonzero(self.materials[:, 0] == INTERNAL)
+        if len(hit):
+            self.prm[hit[0]] = row
+            return int(hit[0])
+        self.prm = np.vstack([self.prm, row[None, :]])
+        self.materials = np.vstack([self.materials, np.array([INTERNAL, INTERNAL], np.int64)[None, :]])
+        return len(self.prm) - 1
+
     def set_models(self, materials, rows):
         """Use these models (material pairs a <= b and rows of model_row); a pair that had a
         model gets the new one, its bonds keep their history."""
@@ -220,29 +248,34 @@ class BondSet:
         mb = np.maximum(smat[pi], smat[pj])
         model = np.array([lookup.get((a, b), -1) for a, b in zip(ma.tolist(), mb.tolist())], np.int64)
         ok = (delta > -gap) & (model >= 0)
-        old_i = self.i
-        have = set(zip(old_i.tolist(), self.j.tolist()))
+        have = set(zip(self.i.tolist(), self.j.tolist()))
         new = np.array([k for k in np.nonzero(ok)[0] if (int(pi[k]), int(pj[k])) not in have], np.int64)
         if fraction < 1.0:
             new = np.sort(rng.permutation(new)[:int(round(fraction * len(new)))])
-        if len(new) == 0:
+        return self.add(pi[new], pj[new], model[new], delta[new], len(rad), stress_free)
+
+    def add(self, pi, pj, model, delta, n_spheres, stress_free=False):
+        """Append new bonds between spheres ``pi`` < ``pj`` (not yet bonded) with model rows
+        ``model`` and overlaps ``delta`` [m] now (negative for a gap); ``stress_free`` as in
+        :meth:`bond_touching`. Returns how many."""
+        if len(pi) == 0:
             return 0
-        hist = np.zeros((len(new), B.N_HIST))
+        hist = np.zeros((len(pi), B.N_HIST))
         # H_SEP: the separation, or (Burgers in compression) the elongation -delta at installation
-        both = (self.prm[model[new], B.B_KIND] == B.BURGERS) & (self.prm[model[new], B.B_COMP] != 0.0)
-        hist[:, B.H_SEP] = np.where(both, -delta[new], np.maximum(-delta[new], 0.0))
+        both = (self.prm[model, B.B_KIND] == B.BURGERS) & (self.prm[model, B.B_COMP] != 0.0)
+        hist[:, B.H_SEP] = np.where(both, -delta, np.maximum(-delta, 0.0))
         if stress_free:
-            cb = self.prm[model[new], B.B_KIND] == B.CONTACT_BOND
-            hist[:, B.H_D0] = np.where(cb, delta[new], 0.0)
-        i = np.concatenate([old_i, pi[new]])
-        j = np.concatenate([self.j, pj[new]])
+            cb = self.prm[model, B.B_KIND] == B.CONTACT_BOND
+            hist[:, B.H_D0] = np.where(cb, delta, 0.0)
+        i = np.concatenate([self.i, pi])
+        j = np.concatenate([self.j, pj])
         order = np.lexsort((j, i))
-        self.start = np.searchsorted(i[order], np.arange(len(rad) + 1)).astype(np.int64)
+        self.start = np.searchsorted(i[order], np.arange(n_spheres + 1)).astype(np.int64)
         self.j = np.ascontiguousarray(j[order])
-        self.model = np.ascontiguousarray(np.concatenate([self.model, model[new]])[order])
-        self.state = np.ascontiguousarray(np.concatenate([self.state, np.zeros(len(new), np.int8)])[order])
+        self.model = np.ascontiguousarray(np.concatenate([self.model, model])[order])
+        self.state = np.ascontiguousarray(np.concatenate([self.state, np.zeros(len(pi), np.int8)])[order])
         self.hist = np.ascontiguousarray(np.vstack([self.hist, hist])[order])
-        return len(new)
+        return len(pi)
 
     def critical_omega2(self, mass_min, inert_min, rad_min):
         """Largest omega^2 [1/s^2] the bonds give the lightest sphere: 2 k_n / m for the

@@ -241,6 +241,24 @@ class SphereShape:
         if not s.plan.has("bonds"):
             raise ValueError("bonds are not an effect of this stage")
         n = s.bonds.bond_touching(s.xs, s.rad, s.smat, s.sbody, gap, fraction, rng, stress_free)
+        SphereShape._bonds_changed(s)
+        return n
+
+    @staticmethod
+    def bond_pairs(s, pi, pj, model):
+        """Bond the sphere pairs ``pi`` < ``pj`` (not yet bonded) with the model row ``model``,
+        installed at their overlap now; returns the number of new bonds."""
+        if not s.plan.has("bonds"):
+            raise ValueError("bonds are not an effect of this stage")
+        delta = s.rad[pi] + s.rad[pj] - np.linalg.norm(s.xs[pi] - s.xs[pj], axis=1)
+        n = s.bonds.add(pi, pj, np.full(len(pi), model, np.int64), delta, len(s.rad))
+        SphereShape._bonds_changed(s)
+        return n
+
+    @staticmethod
+    def _bonds_changed(s):
+        """After new bonds: the kernels' bond arrays, fresh lists, and the contacts a bond now
+        replaces taken out of the contact list."""
         s._bond_arrays = s.bonds.kernel_arrays()
         s._fresh_lists = True
         # contacts a bond now replaces are no longer contacts (the rebuilt list leaves them out)
@@ -251,7 +269,6 @@ class SphereShape:
         for c in np.nonzero(nl.act)[0]:
             if (int(nl.pi[c]), int(nl.pj[c])) in bonded:
                 nl.act[c] = 0
-        return n
 
     # ---- state exchange -------------------------------------------------------------------
     @staticmethod

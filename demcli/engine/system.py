@@ -463,6 +463,11 @@ class System:
         self._spheres_only("bonding")
         return self.plugin.bond_touching(self, gap, fraction, rng, stress_free)
 
+    def bond_pairs(self, pi, pj, model):
+        """Bond given sphere pairs (:meth:`demcli.engine.sphere_shape.SphereShape.bond_pairs`)."""
+        self._spheres_only("bonding")
+        return self.plugin.bond_pairs(self, pi, pj, model)
+
     @property
     def friction(self):
         """(n_m, n_m) view of the friction coefficients between particle materials in the pair table;

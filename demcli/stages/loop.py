@@ -50,7 +50,10 @@ def make_system(ctx, cfg, groups, time=0.0, step=0, resume=False):
     from demcli.engine.plan import make_plan
     from demcli.engine.system import Dynamics, System
     from demcli.kernels.walls import MESH, PLANE
+    from demcli.stages.asphalt import bonded as bonded_aggregates
 
+    phase_pairs = phase_models(ctx, groups)[2] if cfg.get("bonds") is not None and cfg.bonds.from_phases else ()
+    groups, members = bonded_aggregates.prepare(ctx, cfg, groups, resume)
     walls = build_walls(cfg, ctx.case, ctx.runner.case_path, f"stages[{ctx.index}].walls")
     shape = scene_shape(groups)
     declared = declared_effects(cfg, ctx.case.dimension)
@@ -74,13 +77,17 @@ def make_system(ctx, cfg, groups, time=0.0, step=0, resume=False):
     if cfg.get("bonds") is not None and cfg.bonds.from_phases:
         import dataclasses
 
-        model = dataclasses.replace(model, pairs=phase_models(ctx, groups)[2] + model.pairs)
+        model = dataclasses.replace(model, pairs=phase_pairs + model.pairs)
     system = System(groups, case_materials(ctx.case, cfg.scaling.stiffness), model, plan, walls,
                     dyn, dt=1.0, time=time, step=step, **extra)
     if p.adaptive_damping is not None and not resume:  # a resumed stage keeps its adapted alpha
         system.alpha = float(p.adaptive_damping.initial)
     if cfg.get("bonds") is not None:
         set_bond_models(ctx, cfg.bonds, system, groups)
+        if members is not None:
+            n = bonded_aggregates.bond_members(system, *members)
+            ctx.log(f"bonded aggregates: {int(np.sum(members[0] >= 0))} lattice balls released from their clumps, "
+                    f"{n} parallel bonds between lattice neighbours")
         if cfg.bonds.create and not resume:
             free = cfg.bonds.install == "stress_free" or (cfg.bonds.install == "auto" and cfg.bonds.from_phases)
             n = system.bond_touching(cfg.bonds.gap * float(system.rad.mean()), stress_free=free)
@@ -392,6 +399,8 @@ def _tables(ckpt, system, plan, hooks):
         cols["alpha"] = "1/s"
     if plan.has("bonds"):
         cols.update({"bonds_intact": "1", "broken_tension": "1", "broken_shear": "1", "bonds_seated": "1"})
+        if np.any(system.bonds.internal()):
+            cols.update({f"intra_{k}": "1" for k in system.bonds.internal_counts()})
     cols.update(hooks.columns)
     wtable = None
     if len(system.walls):
@@ -442,6 +451,8 @@ def _record(system, plan, hooks, table, wtable):
         c = system.bonds.counts()
         row.update({"bonds_intact": c["intact"], "broken_tension": c["broken_tension"],
                     "broken_shear": c["broken_shear"], "bonds_seated": int(system.bonds.seated().sum())})
+        if "intra_intact" in table.columns:
+            row.update({f"intra_{k}": v for k, v in system.bonds.internal_counts().items()})
     if hooks.row is not None:
         row.update(hooks.row(system))
     table.append(row)

@@ -336,6 +336,12 @@ describe_column("alpha", "Mass-proportional damping", "1/s", table="dem",
 for _name, _label in [("bonds_intact", "Intact bonds"), ("broken_tension", "Bonds broken in tension"),
                       ("broken_shear", "Bonds broken in shear"), ("bonds_seated", "Broken bonds seated")]:
     describe_column(_name, _label, integer=True, table="dem", doc="bond count (docs/bonds.md)")
+for _name, _label in [("intra_intact", "Intact bonds inside aggregates"),
+                      ("intra_broken_tension", "Bonds inside aggregates broken in tension"),
+                      ("intra_broken_shear", "Bonds inside aggregates broken in shear")]:
+    describe_column(_name, _label, integer=True, doc="bonded aggregates: bonds between the lattice balls of one "
+                                                     "aggregate (docs/asphalt_lab.md, 'Bonded aggregates'); also "
+                                                     "in the bond counts of all bonds")
 describe_column("<wall>.position", "Wall <wall> position", "m", "mm", 1e3, table="walls",
                 doc="point . n, n the wall's unit normal pointing into the domain: the plane's signed "
                     "coordinate along n, growing as the wall moves into the domain (box face x0 at x = a: +a; "

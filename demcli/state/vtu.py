@@ -9,7 +9,8 @@ spanning the extent along the axis; mesh walls are a second block of triangles w
 (their vertices relative to the wall's point, given by the stage); all with cell data ``wall``, ``kind``, ``control``,
 ``velocity`` and ``force``. Bonds become line cells between the centres of the two
 spheres, with cell data ``state`` (0 intact, 1 broken in tension, 2 in shear), ``model``,
-``force_n`` (compression positive) and ``force_s`` (magnitude); in ParaView apply *Extract
+``force_n`` (compression positive) and ``force_s`` (magnitude), and with bonded aggregates ``intra``
+(1: a bond inside an aggregate, docs/asphalt_lab.md); in ParaView apply *Extract
 Surface* then *Tube*, or colour the lines. Files are binary zlib-compressed VTU written by meshio, atomically;
 the ``.pvd`` collection is rewritten atomically after each snapshot.
 """
@@ -71,6 +72,10 @@ def bond_mesh(state) -> meshio.Mesh:
                  "model": [np.asarray(state["bonds/model"], dtype=np.int64)],
                  "force_n": [np.asarray(state["bonds/force_n"], dtype=np.float64)],
                  "force_s": [np.linalg.norm(fs, axis=1)]}
+    inside = np.asarray(state["bond_models/materials"], np.int64).reshape(-1, 2)[:, 0] < 0 \
+        if "bond_models/materials" in state else np.zeros(0, bool)
+    if np.any(inside):  # bonded aggregates: which bonds hold an aggregate together
+        cell_data["intra"] = [inside[np.asarray(state["bonds/model"], np.int64)].astype(np.int64)]
     return meshio.Mesh(state.sphere_centres(), [("line", np.stack([i, j], axis=1))], cell_data=cell_data)
 
 

@@ -79,6 +79,35 @@ def test_idt_on_the_3d_specimen(run):
     assert (run / "records" / "split_idt.png").stat().st_size > 0
 
 
+def test_idt_with_bonded_aggregates(run):
+    # Given the idt smoke case with `aggregates: {model: bonded}` (its own mastic and test stage
+    # names, so it shares the run folder's chain up to the cut)
+    from demcli.stages.asphalt.bonded import member_pairs
+
+    run_case(ROOT / "cases" / "smoke" / "marshall_ac13_3d_idt_bonded.yaml", out=run, quiet=True)
+    rows = read_record(run / "records" / "split_bonded_idt.csv")[0]
+    res = read_state(run / "06-split_bonded.h5")
+    mastic = read_state(run / "05-mastic_bonded.h5")
+    # Then every aggregate ball is a body of its own, and every pair of lattice neighbours of one
+    # aggregate holds a bond of the INTERNAL model (materials -1), counted apart in the records
+    n_agg_balls = int(np.sum(mastic["phases/sphere"] == 0))
+    assert len(res["bodies/mass"]) == len(res["spheres/radius"]) > n_agg_balls > 0
+    inside = res["bond_models/materials"][res["bonds/model"], 0] < 0
+    agg = np.where(mastic["phases/sphere"] == 0, mastic["spheres/body"], -1)
+    i, j = member_pairs(_sphere_positions(mastic), agg, 2 * float(mastic["aggregates/ball_radius"]))
+    assert inside.sum() == len(i) == rows["intra_intact"][0] > 0
+    assert np.array_equal(np.sort(res["bonds/i"][inside] * len(agg) + res["bonds/j"][inside]), np.sort(i * len(agg) + j))
+    total = rows["intra_intact"] + rows["intra_broken_tension"] + rows["intra_broken_shear"]
+    assert np.all(total == len(i)) and np.all(rows["intra_intact"] <= rows["bonds_intact"])
+    broken = res["bonds/state"][inside] != INTACT
+    assert rows["intra_broken_tension"][-1] + rows["intra_broken_shear"][-1] == broken.sum()
+    # and the bonds VTU marks them
+    import meshio
+
+    vtu = meshio.read(sorted((run / "split_bonded").glob("bonds_*.vtu"))[-1])
+    assert vtu.cell_data["intra"][0].sum() == len(i)
+
+
 def test_marshall_on_the_3d_specimen(run):
     rows = read_record(run / "records" / "break_marshall.csv")[0]
     res = read_state(run / "06-break.h5")

@@ -117,7 +117,8 @@ def _finish(ctx, cfg, state, state_in, table, cols, name, result):
     rows = table.to_arrays()
     d, p = np.asarray(rows["deformation"]), np.asarray(rows["load"])
     ratio, work = kinetic_to_work(rows["kinetic"], p, d)
-    keep = ["time", *cols] + [c for c in ("bonds_intact", "broken_tension", "broken_shear") if c in rows]
+    keep = ["time", *cols] + [c for c in ("bonds_intact", "broken_tension", "broken_shear", "intra_intact",
+                                          "intra_broken_tension", "intra_broken_shear") if c in rows]
     out = RecordTable(name, {**{c: table.columns[c] for c in keep}, "kinetic_to_work": "1"})
     for k in range(len(rows["time"])):
         out.append({**{c: rows[c][k] for c in keep}, "kinetic_to_work": ratio[k]})

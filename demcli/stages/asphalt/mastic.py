@@ -39,7 +39,9 @@ Reads a cut specimen (``specimen`` and ``aggregates`` groups) and:
    group): aggregate-aggregate ``linear_slip`` (linear springs, Coulomb slip),
    aggregate-mastic ``contact_bond`` (adhesion strengths s2n, s2t as forces),
    mastic-mastic ``parallel_bond`` (cohesion strengths s1n, s1t as stresses, bond
-   stiffness per area and radius multiplier); inside an aggregate: the rigid clump.
+   stiffness per area and radius multiplier); inside an aggregate (``aggregates``): the rigid
+   clump (default), or parallel bonds between its lattice balls, which a test stage makes
+   (:mod:`demcli.stages.asphalt.bonded`: bonded aggregates whose bonds break).
    Any model may be given to any pair; every pair needs exactly one, and every model
    its stiffnesses and strengths (a missing pair or strength is a config error, and
    :func:`phase_table` re-validates a stored table).
@@ -60,13 +62,13 @@ import numpy as np
 from demcli.config.schema import Float, List, Section, Str, Tagged
 from demcli.errors import InputError, StageError, StateError
 # common registers the seeds and aggregates groups
+from demcli.stages.asphalt.bonded import AGGREGATES, INTERNAL_MODELS, bond_parameters, tensile_strength
 from demcli.stages.asphalt.common import (copy_group, inside_member_cells, phase_of_spheres, scalar_str,
                                           write_asphalt_vtu)
 from demcli.stages.base import StageType, earlier_stage, register_stage
 from demcli.state.fields import Field, register, register_group
 
 PHASES = ("aggregate", "mastic")
-INTERNAL_MODEL = "rigid_clump"
 
 # parameter columns of phases/pair_params, their units, and the models that need them
 PARAMS = (("kn", "N/m"), ("ks", "N/m"), ("friction", "1"),
@@ -95,7 +97,11 @@ for _name, _kind, _dims, _unit, _doc, _kw in [
         ("param_names", "str", ("n_param",), "", "columns of pair_params", {}),
         ("param_units", "str", ("n_param",), "", "unit of each column of pair_params", {}),
         ("pair_params", "f", ("n_pair", "n_param"), "", "model parameters (SI, NaN where the model has none)", {}),
-        ("internal_model", "str", (), "", "contacts inside an aggregate: rigid_clump (none are computed)", {})]:
+        ("internal_model", "str", (), "", "inside an aggregate: rigid_clump (no contacts are computed) or "
+                                          "parallel_bond (bonded aggregates: lattice neighbours bonded by a test "
+                                          "stage's bonds.from_phases)", {}),
+        ("internal_params", "f", ("n_param",), "", "the parallel bond inside an aggregate (columns of param_names; "
+                                                   "only with internal_model parallel_bond)", {"required": False})]:
     register(Field(f"phases/{_name}", _kind, _dims, _unit, _doc, writer="stage mastic", **_kw))
 
 register_group("mastic", "Mastic volumetrics of a specimen (seed 000)", writer="stage mastic")
@@ -154,6 +160,7 @@ FIELDS = {
     "placement": Str(choices=["coat", "random"], default="coat",
                      doc="sites nearest the aggregates first, or random sites"),
     "contacts": List(CONTACT, min_len=1, doc="one contact model per pair of phases"),
+    "aggregates": AGGREGATES,
 }
 
 
@@ -211,6 +218,33 @@ def pair_table(contacts):
     rows.sort(key=lambda r: r[0])
     return (np.array([r[0] for r in rows], np.int64).reshape(-1, 2), np.array([r[1] for r in rows], dtype=object),
             np.array([r[2] for r in rows]).reshape(-1, len(PARAMS)))
+
+
+def internal_phase(ctx, cfg, state_in):
+    """(phases/internal_model, extra phases fields) of the ``aggregates`` config: rigid clumps, or
+    bonded aggregates with the parallel bond of :func:`demcli.stages.asphalt.bonded.bond_parameters`
+    from the aggregate material's E, nu and the lattice ball radius (phases/internal_params)."""
+    agg = cfg.aggregates
+    if agg.model == "rigid":
+        return np.array(INTERNAL_MODELS["rigid"], dtype=object), {}
+    mats = list(ctx.case.materials)
+    used = np.unique(np.asarray(state_in["spheres/material"], np.int64))
+    if len(used) != 1:
+        raise InputError(f"stage {ctx.name}: aggregates.model bonded needs one aggregate material; the aggregates "
+                         f"have {', '.join(mats[m] for m in used) or 'none'}")
+    mat = ctx.case.materials[mats[int(used[0])]]
+    r = float(np.asarray(state_in.groups["aggregates"]["ball_radius"]))
+    sigma_t = tensile_strength(agg)
+    young = mat.young if agg.young is None else agg.young
+    bp = bond_parameters(young, mat.poisson, r, sigma_t, agg.shear_ratio, agg.radius_multiplier)
+    names = [p for p, _ in PARAMS]
+    prm = np.full(len(PARAMS), np.nan)
+    for key, col in _CONFIG_TO_PARAM["parallel_bond"].items():
+        prm[names.index(col)] = bp[key]
+    ctx.log(f"bonded aggregates: sigma_t {sigma_t / 1e6:.4g} MPa, E {young / 1e9:.4g} GPa, lattice balls of "
+            f"{r * 1e3:.4g} mm: parallel bonds kn_b {bp['bond_kn']:.4g} Pa/m, ks_b {bp['bond_ks']:.4g} Pa/m, "
+            f"strengths {bp['normal_strength'] / 1e6:.4g} / {bp['shear_strength'] / 1e6:.4g} MPa")
+    return np.array(INTERNAL_MODELS["bonded"], dtype=object), {"internal_params": prm}
 
 
 def str_list(values):
@@ -402,11 +436,12 @@ def run(ctx, cfg, state_in):
                "radius": np.r_[np.asarray(s_in["radius"]), np.full(n, r)],
                "material": np.r_[np.asarray(s_in["material"], np.int64), np.full(n, mat, np.int64)]}
     pairs, models, params = pair_table(cfg.contacts)
+    internal, extra = internal_phase(ctx, cfg, state_in)
     phases = {"sphere": np.r_[np.zeros(ns0, np.int8), np.ones(n, np.int8)],
               "names": np.array(PHASES, dtype=object), "pair_phases": pairs, "pair_model": models,
               "param_names": np.array([p for p, _ in PARAMS], dtype=object),
               "param_units": np.array([u for _, u in PARAMS], dtype=object), "pair_params": params,
-              "internal_model": np.array(INTERNAL_MODEL, dtype=object)}
+              "internal_model": internal, **extra}
     vv = (n_void - n) / n_cells
     mastic = {"ball_radius": np.float64(r), "ball_volume": np.float64(v_ball), "density": np.float64(rho),
               "mass_target": np.float64(mass_target), "mass": np.float64(n * m_ball), "count": np.int64(n),
