@@ -313,9 +313,11 @@ def test_lattice_master_curve_recovers_the_applied_shift_factors(master_run):
     for name in ("dm_master_curve.png", "dm_shift_factors.png", "dm_dynamic_modulus.png", "dm_T30C_series.csv",
                  "dm_T10C_dynamic_modulus.csv"):
         assert (master_run / "records" / name).exists(), name
-    # and the output holds the bonds at T_r (its state's viscosities unscaled), the checkpoints are gone
+    # and the output holds the bonds at T_r (its state's viscosities unscaled), as does each temperature's kept
+    # state; the checkpoints are gone
     from demcli.kernels import bonds as B
     assert st["bond_models/params"][0, B.B_CMN] == pytest.approx(CM_T) and st.meta["stage"] == "dm"
+    assert read_state(master_run / "01-dm_T30C.h5")["bond_models/params"][0, B.B_CMN] == pytest.approx(CM_T)
     assert not list(master_run.glob("*.ckpt.h5"))
 
 
@@ -341,7 +343,7 @@ def test_interrupted_second_temperature_resumes_bit_identically(master_run, tmp_
     from demcli.errors import StageError
 
     # Given the master-curve lattice interrupted (Ctrl-C) in its second temperature, at step 60 000 of 190 000,
-    # and resumed (the first temperature runs again: its sweep is not kept across a resume)
+    # and resumed (the first temperature's sweep taken from its kept state 01-dm_T10C.h5)
     case = _master_curve_case(tmp_path)
     real, seen = System.advance, []
 
@@ -358,6 +360,7 @@ def test_interrupted_second_temperature_resumes_bit_identically(master_run, tmp_
     assert (tmp_path / "cut" / "01-dm_T20C.ckpt.h5").exists()
     monkeypatch.setattr(System, "advance", real)
     run_case(case, out=tmp_path / "cut", quiet=True, resume=True)
+    assert "its sweep taken from 01-dm_T10C.h5" in (tmp_path / "cut" / "log.txt").read_text()
     # Then the state equals the uninterrupted run's (the viscosities scaled once, not again on resuming)
     diff = h5_differences(master_run / "01-dm.h5", tmp_path / "cut" / "01-dm.h5")
     assert [d for d in diff if "wall_time" not in d] == []
@@ -379,3 +382,27 @@ def test_bad_temperature_sets_exit_2_with_the_rule(tmp_path, override, message):
     res = CliRunner().invoke(cli, ["check", str(_master_curve_case(tmp_path)), "--set", override])
     assert res.exit_code == 2, res.output
     assert message in res.output and "stages[1].temperatures" in res.output and "Traceback" not in res.output
+
+
+SMOKE_MASTER = ROOT / "cases" / "smoke" / "sand_asphalt_master_curve.yaml"
+
+
+def test_smoke_master_curve_case(smoke, tmp_path):
+    # Given the smoke specimen swept at 4.4, 21.1 (T_r) and 37.8 degC (WLF shift of the viscosities)
+    run_case(SMOKE_MASTER, out=tmp_path, quiet=True)
+    st, plain = read_state(tmp_path / "01-dm.h5"), read_state(smoke / "01-dm.h5")
+    res = {k: st[f"dynamic_modulus_result/{k}"] for k in ("temperature", "modulus", "phase_angle")}
+    # Then the sweep at T_r is bit-identical to the smoke case's without temperatures (same specimen, same bonds)
+    at_ref = res["temperature"] == 21.1
+    for k in ("modulus", "phase_angle"):
+        assert res[k][at_ref].tolist() == plain[f"dynamic_modulus_result/{k}"].tolist()
+    # and the cold sweep is nearly elastic (phase < 1 deg: the viscosities x 55), the T_r one is not
+    assert np.all(res["phase_angle"][res["temperature"] == 4.4] < 1) and np.all(res["phase_angle"][at_ref] > 5)
+    # and the master curve's records are written with the applied shift factors (WLF: +1.743, 0, -1.251)
+    shifts = read_record(tmp_path / "records" / "dm_shift_factors.csv")[0]
+    assert shifts["applied_log_shift_factor"] == pytest.approx([1.7428, 0.0, -1.2507], abs=1e-4)
+    assert np.all(np.isfinite(shifts["log_shift_factor"])) and (tmp_path / "records" / "dm_master_curve.png").exists()
+    # and the stage says that this specimen's sweeps do not superpose (measured: |E*| falls with f at 4.4 and
+    # 37.8 degC, the fitted log10 a_T -0.40 and +0.35 against the applied +1.74 and -1.25)
+    log = (tmp_path / "log.txt").read_text()
+    assert "master curve at 21.1 degC (arrhenius shifts)" in log and "the points do not superpose" in log

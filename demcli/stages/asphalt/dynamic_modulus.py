@@ -347,26 +347,17 @@ def _bonds_at(prm, materials, tset, tcfg, names, reference):
 
 
 def _temperature_sweeps(ctx, cfg, state_in):
-    """The sweep at each temperature set, each from the stage's input (its records and
-    snapshots ``<stage>_T<T>C_*``); the output: the last sweep's specimen with the bonds at T_r,
-    the rows of every temperature (records ``<stage>_dynamic_modulus``, with temperature) and,
-    from two temperatures, the master curve (:func:`_master_curve`)."""
+    """The sweep at each temperature set (:func:`_one_temperature`); the output: the last sweep's
+    specimen with the bonds at T_r, the rows of every temperature (records
+    ``<stage>_dynamic_modulus``, with temperature) and, from two temperatures, the master curve
+    (:func:`_master_curve`)."""
     tc = cfg.temperatures
-    rows, applied, reference = [], {}, []
+    rows, applied = [], {}
     for tset in tc.sets:
-        sub = _at_temperature(ctx, tset.temperature)
         applied[float(tset.temperature)] = tsets.log_shift(tset, tc)
-        how = (f"Burgers viscosities x a_T = {10 ** applied[float(tset.temperature)]:.5g}" if tset.models is None
-               else f"explicit Burgers elements of {len(tset.models)} material pair(s)")
-        ctx.log(f"temperature {tset.temperature:g} degC: {how}")
-        bonds = functools.partial(_bonds_at, tset=tset, tcfg=tc, names=list(ctx.case.materials), reference=reference)
-        state, res = _sweep(sub, cfg, state_in, bonds)
-        sub.checkpoint_path.unlink(missing_ok=True)
+        state, res = _one_temperature(ctx, cfg, state_in, tset)
         rows += [{"temperature": float(tset.temperature), **r} for r in res]
-        ctx.throughput = sub.throughput
     state.meta["stage"] = ctx.name
-    if reference:
-        state.groups["bond_models"]["params"] = reference[0]
     table = _result_table(rows, temperature=True)
     table.to_state(state)
     _result_group(state, rows, temperature=True)
@@ -374,6 +365,37 @@ def _temperature_sweeps(ctx, cfg, state_in):
     if len(tc.sets) > 1:
         _master_curve(ctx, state, tc, rows, applied)
     return state
+
+
+def _one_temperature(ctx, cfg, state_in, tset):
+    """The sweep at one temperature set from the stage's input (records and snapshots
+    ``<stage>_T<T>C_*``): (its state, result rows). Its state, with the bonds at T_r, is kept
+    as ``<NN>-<stage>_T<T>C.h5``; a resumed run (``--resume``) takes a kept one of the same
+    config and input instead of sweeping again."""
+    from demcli.state import RecordTable, read_state, write_state
+
+    sub = _at_temperature(ctx, tset.temperature)
+    path = sub.checkpoint_path.with_name(f"{ctx.index:02d}-{sub.name}.h5")
+    if ctx.runner.resume and path.exists():
+        st = read_state(path)
+        if st.meta.get("config_hash") == ctx.config_hash and st.meta.get("input_hash") == ctx.input_hash:
+            ctx.log(f"temperature {tset.temperature:g} degC: its sweep taken from {path.name}")
+            a = RecordTable.from_state(st, "dynamic_modulus").to_arrays()
+            return st, [{k: a[k][i].item() for k in _RESULT_COLUMNS} for i in range(len(a["frequency"]))]
+    a_t = 10 ** tsets.log_shift(tset, cfg.temperatures)
+    ctx.log(f"temperature {tset.temperature:g} degC: " + (f"Burgers viscosities x a_T = {a_t:.5g}" if tset.models is
+                                                           None else f"explicit Burgers elements of "
+                                                                     f"{len(tset.models)} material pair(s)"))
+    reference = []
+    bonds = functools.partial(_bonds_at, tset=tset, tcfg=cfg.temperatures, names=list(ctx.case.materials),
+                              reference=reference)
+    state, res = _sweep(sub, cfg, state_in, bonds)
+    state.groups["bond_models"]["params"] = reference[0]
+    ctx.runner.finish_state(state)
+    write_state(path, state)
+    sub.checkpoint_path.unlink(missing_ok=True)
+    ctx.throughput = sub.throughput
+    return state, res
 
 
 def _sweeps_figure(ctx, table):
@@ -407,6 +429,8 @@ def _master_curve(ctx, state, tc, rows, applied):
             f"(1 + exp({be:.4g} + {ga:.4g} log10 f_r)); log10 a_T " +
             ", ".join(f"{t:g} degC {s:+.4f}" for t, s in zip(curve.temperatures, curve.log_shift)) +
             f"; rms residual {curve.rms:.3g} (log10)")
+    for line in mc.superposition_warnings(curve, rows, applied):
+        ctx.log(f"warning: {line}")
 
 
 def _report(ctx, cfg, res, n_s):

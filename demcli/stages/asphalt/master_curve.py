@@ -43,6 +43,16 @@ describe_column("fitted_modulus", "Fitted dynamic modulus", "Pa", "MPa", 1e-6, t
                 doc="the sigmoidal master curve at the reduced frequency")
 describe_column("log_shift_factor", "Shift factor log10 a_T", table="shift_factors",
                 doc="log10 a_T fitted with the master curve")
+for _name, _label, _unit, _doc in [
+        ("delta", "Sigmoid delta", "1", "lower asymptote, log10 of |E*| in Pa"),
+        ("alpha", "Sigmoid alpha", "1", "upper minus lower asymptote, log10"),
+        ("beta", "Sigmoid beta", "1", "location: the midpoint at log10 f_r = -beta / gamma"),
+        ("gamma", "Sigmoid gamma", "1", "steepness per decade of f_r (negative: stiffer when faster)"),
+        ("reference_temperature", "Reference temperature", "degC", "T_r, where a_T = 1"),
+        ("c1", "WLF C_1", "1", "fitted (fit: wlf), else NaN"), ("c2", "WLF C_2", "K", "fitted (fit: wlf), else NaN"),
+        ("activation_energy", "Activation energy", "J/mol", "fitted (fit: arrhenius), else NaN"),
+        ("rms_residual", "RMS residual", "1", "of log10 |E*| about the curve")]:
+    describe_column(_name, _label, _unit, table="master_curve_fit", doc=_doc)
 describe_column("applied_log_shift_factor", "Applied log10 a_T", table="shift_factors",
                 doc="log10 a_T the temperature set applied to the bonds' viscosities (NaN: explicit parameters)")
 
@@ -169,6 +179,29 @@ def _constrained(residual, form, sig, shift, temps, t_ref):
     return least_squares(residual, list(sig) + list(start), args=(form,), bounds=bounds, max_nfev=20000).x
 
 
+def superposition_warnings(curve, rows, applied, tolerance=0.1):
+    """What says the points are no master curve, in words: a temperature whose |E*| falls
+    between two frequencies by more than the larger fit residual / amplitude of the two (a
+    viscoelastic solid's rises with f; a specimen that changes during the sweep, e.g. stiffens
+    as it creeps, need not), and fitted log10 a_T further than ``tolerance`` from the applied
+    one (``applied``: {T: log10 a_T or NaN}; for a network of springs and dashpots whose
+    viscosities all scale by a_T they agree up to the inertia). ``rows``: the stage's result
+    rows (temperature, frequency, modulus, fit_residual)."""
+    out = []
+    for t in curve.temperatures:
+        pts = sorted((r["frequency"], r["modulus"], r["fit_residual"]) for r in rows if r["temperature"] == t)
+        if any(b[1] < a[1] * (1 - max(a[2], b[2])) for a, b in zip(pts, pts[1:])):
+            out.append(f"at {t:g} degC |E*| does not rise with the frequency (" +
+                       ", ".join(f"{m / 1e6:.4g} MPa at {f:g} Hz" for f, m, _ in pts) +
+                       "): the specimen changes during the sweep; time-temperature superposition does not hold")
+    for t, s in zip(curve.temperatures, curve.log_shift):
+        a = applied.get(float(t), math.nan)
+        if abs(s - a) > tolerance:
+            out.append(f"at {t:g} degC the fitted log10 a_T {s:+.4g} is {s - a:+.3g} from the applied {a:+.4g}: the "
+                       "points do not superpose as the bonds' shift predicts")
+    return out
+
+
 def master_curve_tables(curve, rows, applied):
     """The records of a fitted curve: ``master_curve`` (per measured point: temperature [degC],
     frequency, reduced frequency [Hz], |E*| [Pa], phase angle [deg], fitted |E*| [Pa]),
@@ -187,7 +220,7 @@ def master_curve_tables(curve, rows, applied):
         shifts.append(temperature=t, log_shift_factor=s, applied_log_shift_factor=applied.get(float(t), math.nan))
     c = dict(zip(("c1", "c2") if curve.form == "wlf" else ("activation_energy",), curve.constants))
     fit = RecordTable("master_curve_fit", {"delta": "1", "alpha": "1", "beta": "1", "gamma": "1",
-                                           "reference_temperature": "degC", "c1": "1", "c2": "degC",
+                                           "reference_temperature": "degC", "c1": "1", "c2": "K",
                                            "activation_energy": "J/mol", "rms_residual": "1"})
     fit.append(dict(zip(("delta", "alpha", "beta", "gamma"), curve.sigmoid)), reference_temperature=curve.reference,
                c1=c.get("c1", math.nan), c2=c.get("c2", math.nan),
@@ -228,6 +261,10 @@ def master_curve_figure(curve, pts, shifts, title=""):
     bx.set_xlabel("Temperature (°C)", fontsize=FONT["label"])
     bx.set_ylabel("Shift factor log₁₀ a_T", fontsize=FONT["label"])
     bx.legend(fontsize=FONT["legend"])
+    from matplotlib.ticker import FuncFormatter
+
+    for axis in (ax.yaxis.set_major_formatter, ax.yaxis.set_minor_formatter):  # 40, 50, 60 rather than 4 x 10^1
+        axis(FuncFormatter(lambda v, _: f"{v:g}"))
     for a in (ax, bx):
         a.grid(True, alpha=0.3, which="both")
         a.tick_params(labelsize=FONT["tick"])
