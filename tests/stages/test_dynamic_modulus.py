@@ -237,8 +237,9 @@ TEMPERATURES = {"reference": 20, "sets": [
 
 def _master_curve_case(tmp_path, **stage):
     """The 3D lattice with the master-curve dashpots at 270, 90, 30 Hz and the three temperature sets."""
-    return _lattice_case(tmp_path, 3, cm=CM_T, ck=CK_T, **{"frequencies": F_T, "conditioning_cycles": 2, "points_per_cycle": 16,
-                                                            "temperatures": TEMPERATURES, **stage})
+    return _lattice_case(tmp_path, 3, cm=CM_T, ck=CK_T, **{"frequencies": F_T, "conditioning_cycles": 2,
+                                                            "points_per_cycle": 16, "temperatures": TEMPERATURES,
+                                                            **stage})
 
 
 def test_sigmoid_fit_recovers_known_shift_factors():
@@ -254,11 +255,12 @@ def test_sigmoid_fit_recovers_known_shift_factors():
         e = 10 ** sigmoid(np.log10(ff) + np.repeat(shifts, len(f)), *sig)
         # When fitted with that form at T_r = 21.1 degC
         c = fit_master_curve(t, ff, e, 21.1, form)
-        # Then the shift factors and the sigmoid come back (measured: within 1e-6 without noise)
-        print(form, "exact: log a_T error", np.max(np.abs(c.log_shift - shifts)), "sigmoid", np.subtract(c.sigmoid, sig))
+        # Then the shift factors and the sigmoid come back (measured: within 7e-10 and 3e-15 without noise)
+        print(form, "exact: log a_T error", np.max(np.abs(c.log_shift - shifts)), np.subtract(c.sigmoid, sig))
         assert np.max(np.abs(c.log_shift - shifts)) < 1e-4 and np.allclose(c.sigmoid, sig, atol=1e-3), form
         assert c.rms < 1e-5
-        # and with 1 % noise on |E*| within 0.05 in log10 a_T (measured: 0.003-0.056 at 1 % noise, seed 1)
+        # and with 1.2 % noise on |E*| (0.005 in log10) within 0.05 in log10 a_T (measured: 0.013 free, 0.028 WLF,
+        # 0.013 Arrhenius; seed 1)
         noisy = e * 10 ** (0.005 * np.random.default_rng(1).standard_normal(len(e)))
         err = np.max(np.abs(fit_master_curve(t, ff, noisy, 21.1, form).log_shift - shifts))
         print(form, "1 % noise: log a_T error", err)
@@ -286,18 +288,20 @@ def test_lattice_master_curve_recovers_the_applied_shift_factors(master_run):
     res = {k: st[f"dynamic_modulus_result/{k}"] for k in ("temperature", "frequency", "modulus", "phase_angle")}
     assert res["temperature"].tolist() == [10.0] * 3 + [20.0] * 3 + [30.0] * 3 and res["frequency"].tolist() == F_T * 3
     # Then every point is the closed form at its reduced frequency: |E*| within 2 %, the phase within 1 degree
-    # (measured: |E*| within 1.3e-4, phase within 0.005 deg)
+    # (measured: |E*| within 1.9e-3, phase within 0.11 deg, both at 270 Hz, f / f_n 0.07; 2e-4 and 0.004 deg below)
     a_t = np.array([A_T[t] for t in res["temperature"]])
     exact = np.array([closed_form(f, 3, CM_T * a, CK_T * a) for f, a in zip(res["frequency"], a_t)])
     print("|E*| rel err", res["modulus"] / exact[:, 0] - 1, "phase err", res["phase_angle"] - exact[:, 1])
-    assert np.all(np.abs(res["modulus"] / exact[:, 0] - 1) < 0.02) and np.all(np.abs(res["phase_angle"] - exact[:, 1]) < 1)
+    assert np.all(np.abs(res["modulus"] / exact[:, 0] - 1) < 0.02)
+    assert np.all(np.abs(res["phase_angle"] - exact[:, 1]) < 1)
     # and the points of equal reduced frequency collapse: 10 degC at 90 Hz, 20 degC at 270 Hz (f_r 270 Hz); 20 degC
-    # at 30 Hz, 30 degC at 90 Hz (f_r 30 Hz), within 0.5 % (the inertia, (f/f_n)^2 ~ 2e-3 at 270 Hz, does not
-    # shift with the temperature)
+    # at 30 Hz, 30 degC at 90 Hz (f_r 30 Hz), within 0.5 % (measured 8.9e-4, 2.2e-4: the inertia, (f/f_n)^2 ~ 5e-3
+    # at 270 Hz, does not shift with the temperature)
     m = res["modulus"]
     print("collapse", m[1] / m[3] - 1, m[5] / m[7] - 1)
     assert abs(m[1] / m[3] - 1) < 5e-3 and abs(m[5] / m[7] - 1) < 5e-3
-    # and the fitted free shift factors recover the applied ones, |error in log10 a_T| < 0.05 (measured: 1e-3)
+    # and the fitted free shift factors recover the applied ones, |error in log10 a_T| < 0.05 (measured: 1.1e-4 at
+    # 10 degC, 2.8e-3 at 30 degC)
     shifts = read_record(master_run / "records" / "dm_shift_factors.csv")[0]
     err = shifts["log_shift_factor"] - np.log10([A_T[t] for t in shifts["temperature"]])
     print("log a_T error", err)
@@ -322,7 +326,8 @@ def test_lattice_master_curve_recovers_the_applied_shift_factors(master_run):
 
 
 def test_one_set_at_the_reference_equals_no_temperatures(tmp_path):
-    # Given the lattice at 270 Hz (16 records a cycle) without temperatures, and with one set at the reference temperature
+    # Given the lattice at 270 Hz (16 records a cycle) without temperatures, and with one set at the reference
+    # temperature
     plain, warm = tmp_path / "plain", tmp_path / "warm"
     run_case(_lattice_case(tmp_path, frequencies=[270.0], points_per_cycle=16), out=plain, quiet=True)
     one = _lattice_case(tmp_path, frequencies=[270.0], points_per_cycle=16,

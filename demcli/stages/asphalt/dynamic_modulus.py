@@ -35,6 +35,12 @@ the platens are normal to y, in the plane; the specimen is the spheres' bounding
 plane-stress slice of the case's ``thickness`` t (no stress out of the plane), so A = width x t,
 H_0 its height, and |E*| the slice's in-plane modulus (a plane-strain reading would be
 E / (1 - nu^2)). The 2D chain ends unbonded: ``bonds: {create: true, ...}`` bonds it here.
+
+Temperature sets (``temperatures``, :mod:`demcli.stages.asphalt.temperatures`): the whole sweep at
+each set's temperature T, each from the stage's input, the Burgers viscosities times a_T (springs
+kept: |E*|(f, T) = |E*|(f a_T, T_r) for the bonds) or explicit Burgers elements; from two sets the
+sigmoidal master curve log10 |E*| = delta + alpha / (1 + exp(beta + gamma log10 (f a_T))) with its
+shift factors (:mod:`demcli.stages.asphalt.master_curve`).
 """
 
 import copy
