@@ -136,14 +136,20 @@ class StageContext:
         write_state(self.lastgood_path, st)
         raise StageError(message, state_file=self.lastgood_path)
 
-    def write_records(self, table, x, ys, logy=False, suffix=None, logx=False, **style):
+    def write_records(self, table, x=None, ys=(), logy=False, suffix=None, logx=False, figure=None, **style):
         """CSV of a record table and a PNG of ``ys`` against ``x`` in ``records/`` (``style``:
-        more :meth:`RecordTable.figure` keywords, e.g. ``targets``, ``xlabel``)."""
+        more :meth:`RecordTable.figure` keywords, e.g. ``targets``, ``xlabel``); ``figure``: a
+        matplotlib Figure the stage drew (or None without matplotlib) instead of that plot."""
         folder = self.runner.run_dir / "records"
         folder.mkdir(parents=True, exist_ok=True)
         stem = f"{self.name}_{table.name}"
         table.write_csv(folder / f"{stem}.csv")
         png = folder / f"{stem}{'_' + suffix if suffix else ''}.png"
+        if x is None:
+            from demcli.state.plots import save_png
+
+            save_png(figure, png)
+            return
         table.plot(png, x, ys, logx=logx, logy=logy, title=f"{self.runner.name}: {self.name}", **style)
 
 

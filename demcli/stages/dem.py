@@ -144,7 +144,7 @@ CONTACT_PAIR = Section({
     "cn": Optional(Float("N*s/m", min=0)),
 })
 
-_DASHPOT = Section({"km": Float("N/m", min=0, min_inclusive=False, doc="Maxwell spring K_m"),
+BURGERS_ELEMENT = Section({"km": Float("N/m", min=0, min_inclusive=False, doc="Maxwell spring K_m"),
                     "cm": Float("N*s/m", min=0, min_inclusive=False, doc="Maxwell dashpot C_m"),
                     "kk": Float("N/m", min=0, min_inclusive=False, doc="Kelvin spring K_k"),
                     "ck": Float("N*s/m", min=0, doc="Kelvin dashpot C_k (0: a plain spring)")},
@@ -165,7 +165,7 @@ BOND_MODEL = Tagged("model", {
                              doc="a bonded disc beside the contact: force and moment; strengths in Pa"),
     "burgers": Section({"materials": _MATS,
                         "kn": Float("N/m", min=0, min_inclusive=False, doc="normal stiffness in compression"),
-                        "tension": _DASHPOT, "shear": _DASHPOT, **_STRENGTHS,
+                        "tension": BURGERS_ELEMENT, "shear": BURGERS_ELEMENT, **_STRENGTHS,
                         "compression": Str(choices=("elastic", "burgers"), default="elastic",
                                            doc="normal compression: elastic (kn), or the tension element "
                                                "(one Burgers element in compression and tension alike)")},

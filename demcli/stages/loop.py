@@ -45,8 +45,9 @@ register(Field("checkpoint/ended", "str", (), "", "present when the stepping had
                writer="stage dem", required=False))
 
 
-def make_system(ctx, cfg, groups, time=0.0, step=0, resume=False):
-    """System, plan and time-step information for this stage (``resume``: from a checkpoint)."""
+def make_system(ctx, cfg, groups, time=0.0, step=0, resume=False, bonds=None):
+    """System, plan and time-step information for this stage (``resume``: from a checkpoint;
+    ``bonds``: a stage's change of the bond-model table, :attr:`Hooks.bonds`)."""
     from demcli.engine.plan import make_plan
     from demcli.engine.system import Dynamics, System
     from demcli.kernels.walls import MESH, PLANE
@@ -96,6 +97,8 @@ def make_system(ctx, cfg, groups, time=0.0, step=0, resume=False):
         from demcli.stages.periodic import attach
 
         attach(ctx, cfg, system, groups, resume)
+    if bonds is not None:
+        system.bonds.prm = np.ascontiguousarray(bonds(system.bonds.prm.copy(), system.bonds.materials))
     dt_crit = system.critical_dt()
     dt = stage_time_step(cfg, dt_crit, f"stage {ctx.name}")
     system.dt = dt
@@ -195,6 +198,10 @@ class Hooks:
             fresh start. The checkpoint keeps the scene, the wall positions and velocities
             and the records; a hook that changes anything else (wall control modes or
             parameters) must set it again here from what the checkpoint keeps.
+        bonds: ``bonds(params, materials) -> params``: the bond-model table (rows of
+            :func:`demcli.engine.bonds.model_row`, their material pairs) the stage steps with,
+            from the one its config and input give, before the time step is chosen (a fresh
+            start and a resumed one alike: the dynamic modulus stage's temperature sets).
     """
 
     columns: dict = field(default_factory=dict)
@@ -205,6 +212,7 @@ class Hooks:
     finish: object = None
     timing: object = None
     start: object = None
+    bonds: object = None
 
 
 def _restore(system, groups):
@@ -367,9 +375,13 @@ def _setup(ctx, cfg, state_in, hooks):
     if ckpt is not None and "phases" in state_in.groups:
         # input data the checkpoint does not repeat (bonds.from_phases reads its models there)
         groups = {**groups, "phases": state_in.groups["phases"]}
+    if ckpt is not None and hooks.bonds is not None:  # the hook changes the input's models, not its own output
+        groups = {k: v for k, v in groups.items() if k != "bond_models"}
+        if "bond_models" in state_in.groups:
+            groups["bond_models"] = state_in.groups["bond_models"]
     system, plan, dt, dt_crit = make_system(ctx, cfg, groups, time=float(source.meta.get("time", 0.0)) if ckpt
                                             else 0.0, step=int(source.meta.get("step", 0)) if ckpt else 0,
-                                            resume=ckpt is not None)
+                                            resume=ckpt is not None, bonds=hooks.bonds)
     if ckpt is not None:
         _restore(system, groups)
     else:

@@ -35,8 +35,16 @@ the platens are normal to y, in the plane; the specimen is the spheres' bounding
 plane-stress slice of the case's ``thickness`` t (no stress out of the plane), so A = width x t,
 H_0 its height, and |E*| the slice's in-plane modulus (a plane-strain reading would be
 E / (1 - nu^2)). The 2D chain ends unbonded: ``bonds: {create: true, ...}`` bonds it here.
+
+Temperature sets (``temperatures``, :mod:`demcli.stages.asphalt.temperatures`): the whole sweep at
+each set's temperature T, each from the stage's input, the Burgers viscosities times a_T (springs
+kept: |E*|(f, T) = |E*|(f a_T, T_r) for the bonds) or explicit Burgers elements; from two sets the
+sigmoidal master curve log10 |E*| = delta + alpha / (1 + exp(beta + gamma log10 (f a_T))) with its
+shift factors (:mod:`demcli.stages.asphalt.master_curve`).
 """
 
+import copy
+import functools
 import math
 import time as _time
 
@@ -48,6 +56,7 @@ from demcli.kernels import walls as W
 from demcli.stages import dem, loop
 from demcli.stages.asphalt.common import TEST_TIME, cylinder_specimen, kinetic_to_work, lab_case_check
 from demcli.stages.asphalt.common import orientation_check, orientation_field, planar_slab
+from demcli.stages.asphalt import master_curve as mc, temperatures as tsets
 from demcli.stages.base import ENGINE_KEEPS, ENGINE_OUTPUT, StageType, register_stage
 from demcli.state.fields import Field, register, register_group
 from demcli.state.records import describe_column
@@ -72,6 +81,9 @@ for _name, _unit, _doc in [("frequency", "Hz", "loading frequencies, in the orde
                            ("kinetic_to_work", "1", "largest kinetic energy / work over the measured cycles "
                                                     "(quasi-static measure)")]:
     register(Field(f"dynamic_modulus_result/{_name}", "f", ("n_freq",), _unit, _doc, writer="stage dynamic_modulus"))
+register(Field("dynamic_modulus_result/temperature", "f", ("n_freq",), "degC", "temperature set of each row (only "
+               "with temperatures: rows per temperature, each a whole sweep)", writer="stage dynamic_modulus",
+               required=False))
 
 
 def sinusoid_fit(t, y, frequency):
@@ -133,6 +145,7 @@ def _fields():
                                doc="warn when the kinetic energy exceeds this share of the platen's work on a row of "
                                    "a frequency's measured cycles (0.01: see docs/asphalt_lab.md)"),
         "time": TEST_TIME,
+        "temperatures": tsets.TEMPERATURES,
     })
     return f
 
@@ -240,7 +253,16 @@ def _results(cfg, load, rows, area, h0, m_eff, ratio):
 
 
 def run_dynamic_modulus(ctx, cfg, state_in):
-    """The stage: platens, the haversine schedule, records and the fitted |E*| and phase."""
+    """The stage: one frequency sweep, or with ``temperatures`` one per temperature set, each from
+    the stage's input, and the master curve of two or more."""
+    if cfg.temperatures is None:
+        return _sweep(ctx, cfg, state_in)[0]
+    return _temperature_sweeps(ctx, cfg, state_in)
+
+
+def _sweep(ctx, cfg, state_in, bonds=None):
+    """Platens, the haversine schedule, records and the fitted |E*| and phase: (state, result
+    rows of :func:`_results`); ``bonds``: :attr:`demcli.stages.loop.Hooks.bonds`."""
     from demcli.config.schema import Node
     from demcli.state import RecordTable
 
@@ -257,6 +279,7 @@ def run_dynamic_modulus(ctx, cfg, state_in):
     dcfg["time"] = Node({"duration": None, "steps": 1, "dt": cfg.time.dt, "dt_factor": cfg.time.dt_factor})
     cols = {"stress": "Pa", "strain": "1", "frequency": "Hz"}
     n_s = len(state_in.groups["spheres"]["radius"])
+    out = []
 
     def row(system):
         k = load.apply(system)
@@ -273,24 +296,147 @@ def run_dynamic_modulus(ctx, cfg, state_in):
             series.append({"kinetic_to_work": ratio[k], **{n: rows[n][k] for n in ("time", "stress", "strain")}})
         ctx_.write_records(series, x="time", ys=["strain"])
         res = _results(cfg, load, rows, area, h0, mload + mspec / 3.0, ratio)
-        t = RecordTable("dynamic_modulus", {"frequency": "Hz", "modulus": "Pa", "phase_angle": "deg",
-                                            "fit_residual": "1", "frequency_ratio": "1", "kinetic_to_work": "1",
-                                            "steps": "1", "wall_time": "s"})
         _report(ctx_, cfg, res, n_s)
-        for r in res:
-            t.append(r)
+        t = _result_table(res)
         t.to_state(state)
         ctx_.write_records(t, x="frequency", ys=["modulus", "phase_angle"], logx=True)
-        state.groups["dynamic_modulus_result"] = {n: np.array([r[n] for r in res], float) for n in
-                                                  ("frequency", "modulus", "phase_angle", "frequency_ratio",
-                                                   "kinetic_to_work")}
+        _result_group(state, res)
         for grp in ("bonded_specimen",):
             if grp in state_in.groups:
                 state.groups[grp] = dict(state_in.groups[grp])
+        out.extend(res)
 
     hooks = loop.Hooks(columns=cols, row=row, finish=finish, timing=load.timing,
-                       start=lambda system, ckpt: load.apply(system))
-    return loop.integrate(ctx, Node(dcfg), state_in, hooks)
+                       start=lambda system, ckpt: load.apply(system), bonds=bonds)
+    return loop.integrate(ctx, Node(dcfg), state_in, hooks), out
+
+
+_RESULT_COLUMNS = {"frequency": "Hz", "modulus": "Pa", "phase_angle": "deg", "fit_residual": "1",
+                   "frequency_ratio": "1", "kinetic_to_work": "1", "steps": "1", "wall_time": "s"}
+_RESULT_FIELDS = ("frequency", "modulus", "phase_angle", "frequency_ratio", "kinetic_to_work")
+
+
+def _result_table(res, temperature=False):
+    """The ``dynamic_modulus`` record table of result rows (a ``temperature`` column first when
+    the rows carry one)."""
+    from demcli.state import RecordTable
+
+    t = RecordTable("dynamic_modulus", {**({"temperature": "degC"} if temperature else {}), **_RESULT_COLUMNS})
+    for r in res:
+        t.append(r)
+    return t
+
+
+def _result_group(state, res, temperature=False):
+    """The state group ``dynamic_modulus_result`` of result rows (``temperature``: with that field)."""
+    names = (("temperature",) if temperature else ()) + _RESULT_FIELDS
+    state.groups["dynamic_modulus_result"] = {n: np.array([r[n] for r in res], float) for n in names}
+
+
+def _at_temperature(ctx, temperature):
+    """The stage context of one temperature set: records, snapshots, log lines and checkpoint
+    named ``<stage>_T<T>C``."""
+    sub = copy.copy(ctx)
+    sub.name = f"{ctx.name}_T{temperature:g}C"
+    sub.snapshot_dir = ctx.snapshot_dir.with_name(sub.name)
+    sub.checkpoint_path = ctx.checkpoint_path.with_name(f"{ctx.index:02d}-{sub.name}.ckpt.h5")
+    sub.lastgood_path = ctx.lastgood_path.with_name(f"{ctx.index:02d}-{sub.name}.lastgood.h5")
+    return sub
+
+
+def _bonds_at(prm, materials, tset, tcfg, names, reference):
+    """:func:`demcli.stages.asphalt.temperatures.bond_table_at`, keeping the first table it is
+    given (the bonds at T_r) in the list ``reference``."""
+    if not reference:
+        reference.append(prm.copy())
+    return tsets.bond_table_at(prm, materials, tset, tcfg, names)
+
+
+def _temperature_sweeps(ctx, cfg, state_in):
+    """The sweep at each temperature set (:func:`_one_temperature`); the output: the last sweep's
+    specimen with the bonds at T_r, the rows of every temperature (records
+    ``<stage>_dynamic_modulus``, with temperature) and, from two temperatures, the master curve
+    (:func:`_master_curve`)."""
+    tc = cfg.temperatures
+    rows, applied = [], {}
+    for tset in tc.sets:
+        applied[float(tset.temperature)] = tsets.log_shift(tset, tc)
+        state, res = _one_temperature(ctx, cfg, state_in, tset)
+        rows += [{"temperature": float(tset.temperature), **r} for r in res]
+    state.meta["stage"] = ctx.name
+    table = _result_table(rows, temperature=True)
+    table.to_state(state)
+    _result_group(state, rows, temperature=True)
+    ctx.write_records(table, figure=_sweeps_figure(ctx, table))
+    if len(tc.sets) > 1:
+        _master_curve(ctx, state, tc, rows, applied)
+    return state
+
+
+def _one_temperature(ctx, cfg, state_in, tset):
+    """The sweep at one temperature set from the stage's input (records and snapshots
+    ``<stage>_T<T>C_*``): (its state, result rows). Its state, with the bonds at T_r, is kept
+    as ``<NN>-<stage>_T<T>C.h5``; a resumed run (``--resume``) takes a kept one of the same
+    config and input instead of sweeping again."""
+    from demcli.state import RecordTable, read_state, write_state
+
+    sub = _at_temperature(ctx, tset.temperature)
+    path = sub.checkpoint_path.with_name(f"{ctx.index:02d}-{sub.name}.h5")
+    if ctx.runner.resume and path.exists():
+        st = read_state(path)
+        if st.meta.get("config_hash") == ctx.config_hash and st.meta.get("input_hash") == ctx.input_hash:
+            ctx.log(f"temperature {tset.temperature:g} degC: its sweep taken from {path.name}")
+            a = RecordTable.from_state(st, "dynamic_modulus").to_arrays()
+            return st, [{k: a[k][i].item() for k in _RESULT_COLUMNS} for i in range(len(a["frequency"]))]
+    a_t = 10 ** tsets.log_shift(tset, cfg.temperatures)
+    ctx.log(f"temperature {tset.temperature:g} degC: " + (f"Burgers viscosities x a_T = {a_t:.5g}" if tset.models is
+                                                           None else f"explicit Burgers elements of "
+                                                                     f"{len(tset.models)} material pair(s)"))
+    reference = []
+    bonds = functools.partial(_bonds_at, tset=tset, tcfg=cfg.temperatures, names=list(ctx.case.materials),
+                              reference=reference)
+    state, res = _sweep(sub, cfg, state_in, bonds)
+    state.groups["bond_models"]["params"] = reference[0]
+    ctx.runner.finish_state(state)
+    write_state(path, state)
+    sub.checkpoint_path.unlink(missing_ok=True)
+    ctx.throughput = sub.throughput
+    return state, res
+
+
+def _sweeps_figure(ctx, table):
+    """|E*| against f, log-log, one line per temperature (None without matplotlib)."""
+    from demcli.state.records import column_figure
+
+    a = table.to_arrays()
+    lines = [(f"{t:g} °C", table.spec("modulus"), a["frequency"][a["temperature"] == t],
+              a["modulus"][a["temperature"] == t]) for t in dict.fromkeys(a["temperature"].tolist())]
+    return column_figure(table.spec("frequency"), lines, logx=True, logy=True, marker="o",
+                         title=f"{ctx.runner.name}: {ctx.name}")
+
+
+def _master_curve(ctx, state, tc, rows, applied):
+    """Fit the master curve (:func:`demcli.stages.asphalt.master_curve.fit_master_curve`) to the
+    rows; its records (``master_curve`` with the figure, ``shift_factors``, ``master_curve_fit``)
+    into the run folder and the state, and a log line of the fit."""
+    try:
+        curve = mc.fit_master_curve([r["temperature"] for r in rows], [r["frequency"] for r in rows],
+                                    [r["modulus"] for r in rows], tc.reference, tc.fit)
+    except ValueError as e:  # (the case check refuses too few points; a free fit needs T_r among the sets)
+        raise InputError(f"stage {ctx.name}: temperatures: {e}") from None
+    pts, shifts, fit = mc.master_curve_tables(curve, rows, applied)
+    ctx.write_records(pts, figure=mc.master_curve_figure(curve, pts, shifts, f"{ctx.runner.name}: {ctx.name}"))
+    ctx.write_records(shifts, x="temperature", ys=["log_shift_factor", "applied_log_shift_factor"])
+    ctx.write_records(fit, figure=None)
+    for t in (pts, shifts, fit):
+        t.to_state(state)
+    d, al, be, ga = curve.sigmoid
+    ctx.log(f"master curve at {curve.reference:g} degC ({curve.form} shifts): log10|E*| = {d:.4g} + {al:.4g} / "
+            f"(1 + exp({be:.4g} + {ga:.4g} log10 f_r)); log10 a_T " +
+            ", ".join(f"{t:g} degC {s:+.4f}" for t, s in zip(curve.temperatures, curve.log_shift)) +
+            f"; rms residual {curve.rms:.3g} (log10)")
+    for line in mc.superposition_warnings(curve, rows, applied):
+        ctx.log(f"warning: {line}")
 
 
 def _report(ctx, cfg, res, n_s):
@@ -312,9 +458,12 @@ def _report(ctx, cfg, res, n_s):
 
 
 def _case_check(cfg, case, k, scene, report):
-    """The test stages' rules (:func:`lab_case_check`) and the axial orientation."""
+    """The test stages' rules (:func:`lab_case_check`), the axial orientation and the temperature
+    sets' (:func:`demcli.stages.asphalt.temperatures.case_check`)."""
     lab_case_check(cfg, case, k, scene, report, specimen=cfg.section == "specimen")
     orientation_check(cfg, case, k, report, "axial", "the dynamic modulus test")
+    if cfg.temperatures is not None:
+        tsets.case_check(cfg, case, report)
 
 
 register_stage(StageType(
